@@ -1,0 +1,74 @@
+"""Output files that appear whole or not at all."""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import BinaryIO
+
+from .errors import OutputError
+
+
+def check_output(path: str | Path, force: bool = False) -> Path:
+    """Fail early, before any work, when ``path`` cannot be written.
+
+    Raises
+    ------
+    OutputError
+        The folder is missing or not writable, the path is a folder, or the file
+        exists and ``force`` is False.
+    """
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise OutputError(f"{path}: is a folder; give an output file name such as {path}/mesh.ply")
+    if not folder.is_dir():
+        raise OutputError(f"{path}: the folder {folder} does not exist; create it first")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputError(
+            f"{path}: cannot write to the folder {folder} (permission denied); choose another -o"
+        )
+    if path.exists() and not force:
+        raise OutputError(f"{path}: already exists; pass --force to overwrite it")
+    return path
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | Path, force: bool = False) -> Iterator[BinaryIO]:
+    """Open a temporary file beside ``path``; rename it to ``path`` on success.
+
+    On any exception (including KeyboardInterrupt) the temporary file is
+    removed, so a failed run leaves no partial output behind.
+    """
+    path = check_output(path, force)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot create a file there ({exc.strerror})") from None
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            yield fh
+        # mkstemp makes the file private (0600); give it the permissions a plain open would
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        if not force and path.exists():
+            raise OutputError(f"{path}: appeared while writing; pass --force to overwrite it")
+        os.replace(tmp, path)
+    except OSError as exc:
+        _remove(tmp)
+        if exc.errno == errno.ENOSPC:
+            raise OutputError(f"{path}: the disk is full; free space or write elsewhere") from None
+        raise OutputError(f"{path}: writing failed ({exc.strerror or exc})") from None
+    except BaseException:
+        _remove(tmp)
+        raise
+
+
+def _remove(tmp: str) -> None:
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(tmp)

@@ -1,0 +1,70 @@
+"""The main job: read a volume, extract a surface, write it."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from .atomic import check_output
+from .errors import OutputError
+from .extract import DEFAULT_AMBIGUITY, extract
+from .mesh import Mesh
+from .readers import read_volume
+from .volume import Volume
+from .writers import output_format, write_mesh
+
+
+@dataclass
+class ConvertResult:
+    """What :func:`convert` made."""
+
+    volume: Volume
+    mesh: Mesh
+    output: Path
+
+
+def convert(
+    input: str | Path,
+    output: str | Path,
+    level: float | str,
+    *,
+    method: str = "cubes",
+    format: str | None = None,
+    ascii: bool = False,
+    force: bool = False,
+    flip: bool = False,
+    ambiguity: str = DEFAULT_AMBIGUITY,
+    nan_as: float | None = None,
+    input_format: str | None = None,
+    spacing: tuple[float, ...] | None = None,
+    origin: tuple[float, ...] | None = None,
+    on_status: Callable[[str], None] | None = None,
+    **read_options,
+) -> ConvertResult:
+    """Read ``input``, extract the isosurface at ``level``, write it to ``output``.
+
+    Everything that can be checked before the work is checked first (output
+    format and folder, existing file), so a mistake costs no extraction time.
+    Parameters are those of :func:`read_volume`, :func:`extract` and
+    :func:`write_mesh`.
+    """
+    writer = output_format(output, format)
+    check_output(output, force)
+    if Path(output).resolve() == Path(input).resolve():
+        raise OutputError(f"{output}: is the input file; choose another output name")
+    volume = read_volume(input, format=input_format, spacing=spacing, origin=origin, **read_options)
+    if on_status:
+        for note in volume.notes:
+            on_status(f"{volume.source}: {note}")
+    mesh = extract(
+        volume,
+        level,
+        method=method,
+        flip=flip,
+        ambiguity=ambiguity,
+        nan_as=nan_as,
+        on_status=on_status,
+    )
+    path = write_mesh(mesh, output, format=writer.name, ascii=ascii, force=force)
+    return ConvertResult(volume, mesh, path)

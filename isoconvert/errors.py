@@ -1,0 +1,30 @@
+"""Errors the library raises for user mistakes.
+
+Every message names what is wrong (the file, the parameter) and how to fix it,
+in one line. The library never prints or exits; the CLI turns these into one
+line on stderr and a non-zero exit code.
+"""
+
+
+class IsoconvertError(Exception):
+    """Base class of every error caused by input the user can fix."""
+
+
+class InputNotFoundError(IsoconvertError):
+    """An input file, folder or glob does not exist or matches nothing."""
+
+
+class FormatError(IsoconvertError):
+    """A file is not in the format it claims, or a format name is unknown."""
+
+
+class VolumeError(IsoconvertError):
+    """A volume's shape, dtype or values cannot be used for extraction."""
+
+
+class LevelError(IsoconvertError):
+    """The isovalue is unusable for this volume (outside its range, no surface)."""
+
+
+class OutputError(IsoconvertError):
+    """The output cannot be written (exists, folder missing or unwritable)."""

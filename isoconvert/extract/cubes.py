@@ -1,0 +1,85 @@
+"""Marching Cubes (Wenger, *Isosurfaces*, section 2.3)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ..mesh import Mesh
+from ..volume import Volume
+from .jit import compile_notice
+from .prepare import check_level, kernel_array
+from .tables import DEFAULT_AMBIGUITY, EDGE_AXIS, EDGE_BASE, marching_cubes_table
+
+
+def marching_cubes(
+    volume: Volume,
+    level: float,
+    *,
+    flip: bool = False,
+    ambiguity: str = DEFAULT_AMBIGUITY,
+    nan_as: float | None = None,
+    on_status: Callable[[str], None] | None = None,
+) -> Mesh:
+    """Extract the isosurface of a 3D volume with Marching Cubes.
+
+    Parameters
+    ----------
+    volume : Volume
+        A 3D volume with at least 2 samples along each axis.
+    level : float
+        The isovalue; grid vertices with value >= level are positive.
+    flip : bool
+        Reverse the orientation (normals then point from negative to positive).
+    ambiguity : str
+        Rule for ambiguous faces: "separate-positive" (default, as VTK)
+        or "separate-negative"; see :mod:`isoconvert.extract.tables`.
+    nan_as : float or None
+        Treat NaN/Inf samples as this value; None makes them an error.
+    on_status : callable or None
+        Receives one-line notices (e.g. that numba is compiling).
+
+    Returns
+    -------
+    Mesh
+        ``vertices (V, 3) float64`` in world units, ``cells (C, 3) int64``,
+        ``edge_ids (V,) int64``. Normals point from the positive to the negative
+        side, i.e. out of bright objects.
+    """
+    arr, stats = kernel_array(volume, 3, "cubes", nan_as=nan_as, on_status=on_status)
+    level = check_level(level, stats, volume.source)
+    counts, table = marching_cubes_table(ambiguity)
+    notice = f"compiling the Marching Cubes kernel for {arr.dtype} data (first run only)"
+    with compile_notice(on_status, notice):
+        from .kernels.cubes import count_cubes, fill_cubes
+
+        n_vert, n_tri = count_cubes(arr, level, counts)
+        verts = np.empty((n_vert, 3), dtype=np.float64)
+        edge_ids = np.empty(n_vert, dtype=np.int64)
+        tris = np.empty((n_tri, 3), dtype=np.int64)
+        fill_cubes(arr, level, counts, table, EDGE_BASE, EDGE_AXIS, verts, edge_ids, tris)
+    return finish_mesh(volume, verts, tris, edge_ids, flip, method="cubes", level=level)
+
+
+def finish_mesh(
+    volume: Volume,
+    verts: np.ndarray,
+    cells: np.ndarray,
+    edge_ids: np.ndarray,
+    flip: bool,
+    method: str,
+    level: float,
+) -> Mesh:
+    """Move index-space vertices to world space and settle the orientation.
+
+    A left-handed index-to-world map (negative determinant, as some NRRD
+    ``space directions`` are) mirrors the surface; the triangles are reversed
+    then, so normals still point from the positive to the negative side.
+    """
+    mirrored = np.linalg.det(volume.affine) < 0
+    volume.index_to_world(verts)
+    if mirrored != flip:
+        cells = cells[:, ::-1].copy()
+    info = {"method": method, "level": level, "source": volume.source, "flip": flip}
+    return Mesh(verts, cells, edge_ids, info)

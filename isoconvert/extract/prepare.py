@@ -1,0 +1,119 @@
+"""Validation shared by every extractor: what the kernels may assume."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ..errors import LevelError, VolumeError
+from ..volume import SUPPORTED_DTYPES, ValueRange, Volume, slabs, value_range
+
+
+def kernel_array(
+    volume: Volume,
+    ndim: int,
+    method: str,
+    nan_as: float | None = None,
+    on_status: Callable[[str], None] | None = None,
+) -> tuple[np.ndarray, ValueRange]:
+    """Check a volume and return its samples as the kernels want them.
+
+    Parameters
+    ----------
+    volume : Volume
+        The input.
+    ndim : int
+        Dimensions the extractor works in (2 or 3).
+    method : str
+        Extractor name, for messages.
+    nan_as : float or None
+        Value that replaces NaN and +-Inf samples; None makes them an error.
+    on_status : callable or None
+        Receives a line for each copy made (byte swap, non-contiguous data).
+
+    Returns
+    -------
+    array : (Z, Y, X) or (Y, X) C-contiguous, native byte order
+        A view of ``volume.data`` when possible (no copy).
+    ValueRange
+        Range of the (finite) samples.
+    """
+    src = volume.source
+    data = volume.data
+    if data.ndim != ndim:
+        hint = (
+            "use --method squares for a 2D image"
+            if data.ndim == 2
+            else "use --method cubes or tetra for a 3D volume"
+        )
+        raise VolumeError(f"{src}: {method} needs a {ndim}D volume, got shape {data.shape}; {hint}")
+    if any(n < 2 for n in data.shape):
+        raise VolumeError(
+            f"{src}: shape {data.shape} has a dimension below 2; an isosurface needs at least "
+            "2 samples along every axis (for a single slice, read it as a 2D image)"
+        )
+    dtype = data.dtype
+    if dtype == np.bool_:
+        data = data.view(np.uint8)
+    elif dtype.name not in SUPPORTED_DTYPES:  # the name ignores byte order
+        if np.issubdtype(dtype, np.integer) and dtype.itemsize == 8:
+            data = _narrow_int64(data, src)
+        else:
+            raise VolumeError(
+                f"{src}: samples of type {dtype} cannot be contoured; supported types: "
+                f"{', '.join(SUPPORTED_DTYPES)}"
+            )
+    arr = data.T
+    if not arr.dtype.isnative:
+        if on_status:
+            on_status(f"{src}: converting {arr.dtype.str} samples to native byte order (a copy)")
+        arr = arr.astype(arr.dtype.newbyteorder("="), order="C")
+    if not arr.flags.c_contiguous:
+        arr = np.ascontiguousarray(arr)
+    stats = value_range(arr.T)
+    if stats.nonfinite:
+        if nan_as is None:
+            raise VolumeError(
+                f"{src}: {stats.nonfinite} samples are NaN or infinite; pass --nan-as VALUE "
+                "(nan_as=) to treat them as that value"
+            )
+        arr = np.where(np.isfinite(arr), arr, arr.dtype.type(nan_as))
+        lo, hi = min(stats.min, nan_as), max(stats.max, nan_as)
+        if stats.nonfinite == arr.size:
+            lo = hi = float(nan_as)
+        stats = ValueRange(lo, hi, 0)
+    return arr, stats
+
+
+def _narrow_int64(data: np.ndarray, src: str) -> np.ndarray:
+    """64-bit integers are contoured as float64 when that is exact."""
+    limit = 2**53
+    for slab in slabs(data):
+        if slab.size and (slab.min() < -limit or slab.max() > limit):
+            raise VolumeError(
+                f"{src}: 64-bit integer samples beyond +-2**53 cannot be contoured exactly; "
+                "rescale the data first"
+            )
+    return data.astype(np.float64)
+
+
+def check_level(level: float, stats: ValueRange, src: str) -> float:
+    """Make sure ``level`` separates some samples from others.
+
+    A grid vertex is positive when its value is >= level (book Definition 2.1),
+    so a surface exists exactly when ``min < level <= max``.
+    """
+    level = float(level)
+    if not np.isfinite(level):
+        raise LevelError(f"{src}: the level must be a finite number, got {level}")
+    if stats.min == stats.max:
+        raise LevelError(
+            f"{src}: the volume is constant (every sample is {stats.min:g}); it has no isosurface"
+        )
+    if not stats.min < level <= stats.max:
+        raise LevelError(
+            f"{src}: level {level:g} is outside the data range; choose a level with "
+            f"{stats.min:g} < level <= {stats.max:g} (`isoconvert info` suggests some)"
+        )
+    return level

@@ -1,0 +1,191 @@
+"""Volume: a scalar grid with its physical placement."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import VolumeError
+
+#: dtypes the extractors accept without conversion (the kernels specialize on them).
+SUPPORTED_DTYPES = (
+    "uint8",
+    "int8",
+    "uint16",
+    "int16",
+    "uint32",
+    "int32",
+    "float32",
+    "float64",
+)
+
+# Samples per chunk when scanning a volume (about 64 MiB of float64): statistics
+# never need a full-size temporary.
+_CHUNK_SAMPLES = 8 * 1024 * 1024
+
+
+@dataclass
+class Volume:
+    """A 2D or 3D scalar grid in x, y(, z) index order.
+
+    ``data[i, j, k]`` is the sample at grid vertex (i, j, k); x varies fastest in
+    memory (a Fortran-ordered view of a C-ordered (z, y, x) array). The world
+    position of grid vertex ``idx`` is ``origin + direction @ (idx * spacing)``.
+
+    Attributes
+    ----------
+    data : (X, Y, Z) or (X, Y) array
+        The samples, any of :data:`SUPPORTED_DTYPES` (or convertible to one).
+    spacing : (ndim,) float64
+        Distance between neighbouring samples along each axis, > 0.
+    origin : (ndim,) float64
+        World position of grid vertex (0, 0, 0).
+    direction : (ndim, ndim) float64
+        Unit column vectors of the grid axes in world space (identity if the
+        file has none).
+    source : str
+        Where the volume came from, for messages.
+    notes : list of str
+        What the reader assumed or derived (e.g. a shape taken from the file
+        name), for the user to see.
+    unit : str or None
+        Unit of spacing and origin when the file states one.
+    """
+
+    data: np.ndarray
+    spacing: np.ndarray = None  # type: ignore[assignment]
+    origin: np.ndarray = None  # type: ignore[assignment]
+    direction: np.ndarray = None  # type: ignore[assignment]
+    source: str = "<array>"
+    notes: list[str] = field(default_factory=list)
+    unit: str | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.data, np.ndarray):
+            self.data = np.asarray(self.data)
+        nd = self.data.ndim
+        if nd not in (2, 3):
+            raise VolumeError(
+                f"{self.source}: a volume needs 2 or 3 dimensions, got shape {self.data.shape}"
+            )
+        self.spacing = _vector(self.spacing, nd, 1.0, "spacing", self.source)
+        self.origin = _vector(self.origin, nd, 0.0, "origin", self.source)
+        if np.any(self.spacing <= 0):
+            raise VolumeError(
+                f"{self.source}: spacing {tuple(self.spacing.tolist())} must be positive; "
+                "set it with --spacing"
+            )
+        if self.direction is None:
+            self.direction = np.eye(nd)
+        self.direction = np.asarray(self.direction, dtype=np.float64)
+        if self.direction.shape != (nd, nd) or not np.all(np.isfinite(self.direction)):
+            raise VolumeError(
+                f"{self.source}: direction must be a finite {nd}x{nd} matrix, "
+                f"got shape {self.direction.shape}"
+            )
+        if abs(np.linalg.det(self.direction)) < 1e-6:
+            raise VolumeError(f"{self.source}: the axis directions are degenerate (determinant 0)")
+
+    @classmethod
+    def from_zyx(cls, array: np.ndarray, **kwargs) -> Volume:
+        """Wrap a C-ordered ``(Z, Y, X)`` (or ``(Y, X)``) array, as numpy/skimage
+        store images, without copying."""
+        return cls(np.asarray(array).T, **kwargs)
+
+    @property
+    def ndim(self) -> int:
+        return self.data.ndim
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self.data.shape
+
+    @property
+    def affine(self) -> np.ndarray:
+        """(ndim, ndim) matrix taking index offsets to world offsets."""
+        return self.direction * self.spacing[np.newaxis, :]
+
+    def index_to_world(self, points: np.ndarray) -> np.ndarray:
+        """Map index-space points to world space, in place when float64.
+
+        Parameters
+        ----------
+        points : (N, ndim) float64
+            Positions in grid index units (grid vertex (i, j, k) at (i, j, k)).
+
+        Returns
+        -------
+        (N, ndim) float64
+            ``origin + direction @ (points * spacing)``.
+        """
+        pts = np.asarray(points, dtype=np.float64)
+        if np.array_equal(self.direction, np.eye(self.ndim)):
+            pts *= self.spacing
+        else:
+            pts[:] = pts @ self.affine.T
+        pts += self.origin
+        return pts
+
+    def with_placement(
+        self, spacing: tuple[float, ...] | None = None, origin: tuple[float, ...] | None = None
+    ) -> Volume:
+        """A copy of this volume's description (sharing ``data``) with spacing
+        and/or origin replaced, e.g. from the command line."""
+        return Volume(
+            self.data,
+            spacing=self.spacing if spacing is None else spacing,
+            origin=self.origin if origin is None else origin,
+            direction=self.direction,
+            source=self.source,
+            notes=list(self.notes),
+            unit=self.unit,
+        )
+
+
+def _vector(value, nd: int, default: float, name: str, source: str) -> np.ndarray:
+    if value is None:
+        return np.full(nd, default, dtype=np.float64)
+    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    if arr.shape != (nd,) or not np.all(np.isfinite(arr)):
+        raise VolumeError(
+            f"{source}: {name} needs {nd} finite numbers for a {nd}D volume, "
+            f"got {tuple(arr.tolist())}"
+        )
+    return arr
+
+
+def slabs(data: np.ndarray):
+    """Yield contiguous slabs of ``data`` along its last (slowest) axis, each
+    about ``_CHUNK_SAMPLES`` samples, so that scans need no full-size temporary."""
+    per_slice = max(1, int(np.prod(data.shape[:-1])))
+    step = max(1, _CHUNK_SAMPLES // per_slice)
+    for k in range(0, data.shape[-1], step):
+        yield data[..., k : k + step]
+
+
+@dataclass(frozen=True)
+class ValueRange:
+    """Minimum and maximum of a volume's finite samples, and how many are not finite."""
+
+    min: float
+    max: float
+    nonfinite: int
+
+
+def value_range(data: np.ndarray) -> ValueRange:
+    """Scan ``data`` slab by slab for its finite range and count of NaN/Inf."""
+    lo, hi, bad = np.inf, -np.inf, 0
+    floating = np.issubdtype(data.dtype, np.floating)
+    for slab in slabs(data):
+        if floating:
+            finite = np.isfinite(slab)
+            nfin = int(finite.sum())
+            bad += slab.size - nfin
+            if nfin == 0:
+                continue
+            if nfin < slab.size:
+                slab = slab[finite]
+        lo = min(lo, float(slab.min()))
+        hi = max(hi, float(slab.max()))
+    return ValueRange(lo, hi, bad)

@@ -1,0 +1,92 @@
+"""Writers: one module per format and the table of built-ins below."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO
+
+from ..atomic import atomic_output, check_output
+from ..errors import FormatError
+from ..mesh import Mesh
+from ..registry import Registry
+from .obj import write_obj
+from .ply import write_ply
+from .stl import write_stl
+
+
+@dataclass(frozen=True)
+class Writer:
+    """A mesh format: its file suffixes and how to write it to a binary stream."""
+
+    name: str
+    summary: str
+    suffixes: tuple[str, ...]
+    write: Callable[[Mesh, BinaryIO, bool], None]
+    #: whether the format has a binary form (``ascii=False``)
+    has_binary: bool
+
+
+WRITERS: Registry[Writer] = Registry("output format")
+WRITERS.register(
+    "ply",
+    Writer("ply", "Stanford PLY, indexed; binary (default) or --ascii", (".ply",), write_ply, True),
+)
+WRITERS.register("obj", Writer("obj", "Wavefront OBJ, indexed; text", (".obj",), write_obj, False))
+WRITERS.register(
+    "stl",
+    Writer(
+        "stl",
+        "STL, one record per triangle; binary (default) or --ascii",
+        (".stl",),
+        write_stl,
+        True,
+    ),
+)
+
+
+def output_format(path: str | Path, format: str | None = None) -> Writer:
+    """The writer named by ``format``, else by the file suffix."""
+    if format:
+        return WRITERS.get(format)
+    suffix = Path(path).suffix.lower()
+    for _, writer in WRITERS.items():
+        if suffix in writer.suffixes:
+            return writer
+    known = ", ".join(f"{n} ({' '.join(w.suffixes)})" for n, w in WRITERS.items())
+    raise FormatError(
+        f"{path}: unknown output extension {suffix or '(none)'!r}; "
+        f"known output formats: {known}; or name one with --format"
+    )
+
+
+def write_mesh(
+    mesh: Mesh,
+    path: str | Path,
+    *,
+    format: str | None = None,
+    ascii: bool = False,
+    force: bool = False,
+) -> Path:
+    """Write ``mesh`` to ``path`` atomically (a temporary file, then a rename).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    path : str or Path
+    format : str or None
+        ``ply``, ``obj`` or ``stl``; None takes it from the suffix.
+    ascii : bool
+        Text instead of binary for PLY and STL (OBJ is always text).
+    force : bool
+        Overwrite an existing file.
+    """
+    writer = output_format(path, format)
+    check_output(path, force)
+    with atomic_output(path, force) as fh:
+        writer.write(mesh, fh, ascii or not writer.has_binary)
+    return Path(path)
+
+
+__all__ = ["WRITERS", "Writer", "output_format", "write_mesh"]

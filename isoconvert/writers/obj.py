@@ -1,0 +1,20 @@
+"""Wavefront OBJ (text): ``v`` vertices, ``f`` triangles, ``l`` segments."""
+
+from __future__ import annotations
+
+from typing import BinaryIO
+
+import numpy as np
+
+from ..mesh import Mesh
+from .ply import provenance
+from .text import write_rows
+
+
+def write_obj(mesh: Mesh, fh: BinaryIO, ascii: bool = True) -> None:
+    """Write an indexed OBJ file (always text; indices are 1-based)."""
+    fh.write("".join(f"# {line}\n" for line in provenance(mesh)).encode("utf-8"))
+    # 17 significant digits: vertices round-trip as float64
+    write_rows(fh, np.asarray(mesh.vertices, dtype=np.float64), "v %.17g %.17g %.17g\n")
+    cells = np.asarray(mesh.cells) + 1
+    write_rows(fh, cells, "f %d %d %d\n" if cells.shape[1] == 3 else "l %d %d\n")

@@ -1,0 +1,43 @@
+"""STL, binary or ASCII: the one format without shared vertices."""
+
+from __future__ import annotations
+
+from typing import BinaryIO
+
+import numpy as np
+
+from ..errors import FormatError
+from ..mesh import Mesh
+from .text import write_rows
+
+
+def write_stl(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
+    """Write each triangle with its own three vertices and unit normal.
+
+    Zero-area triangles get a zero normal rather than NaN (cf. scikit-image
+    PR #4872, where NaN normals broke slicers).
+    """
+    if not mesh.is_triangles:
+        raise FormatError("STL holds triangles only; write contours as OBJ or PLY")
+    normals = mesh.triangle_normals().astype(np.float32)
+    corners = np.asarray(mesh.vertices, dtype=np.float32)[mesh.cells]  # (C, 3, 3)
+    if ascii:
+        fh.write(b"solid isoconvert\n")
+        rows = np.concatenate([normals, corners.reshape(-1, 9)], axis=1)
+        facet = (
+            "facet normal %.9g %.9g %.9g\n outer loop\n"
+            + "  vertex %.9g %.9g %.9g\n" * 3
+            + " endloop\nendfacet\n"
+        )
+        write_rows(fh, rows, facet)
+        fh.write(b"endsolid isoconvert\n")
+        return
+    header = b"binary STL written by isoconvert"
+    fh.write(header.ljust(80, b" "))
+    fh.write(np.uint32(len(normals)).tobytes())
+    record = np.zeros(
+        len(normals), dtype=[("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")]
+    )
+    record["n"] = normals
+    record["v"] = corners
+    fh.write(record.tobytes())
