@@ -1,0 +1,7 @@
+"""``python -m isoconvert``."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())
