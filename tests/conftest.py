@@ -1,0 +1,73 @@
+"""Shared fixtures: the real scans in ../shared/datasets and small helpers."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DATASETS = ROOT.parent / "shared" / "datasets"
+SAMPLES = ROOT / "sample_volumes"
+
+
+def dataset(name: str) -> Path:
+    """Path of a real scan, or skip the test when the datasets folder is absent."""
+    path = DATASETS / name
+    if not path.exists():
+        pytest.skip(f"real dataset {name} not found in {DATASETS} (clone shared/ beside the repo)")
+    return path
+
+
+def load_samples_module():
+    """The sample_volumes/make_samples.py module (not a package)."""
+    spec = importlib.util.spec_from_file_location("make_samples", SAMPLES / "make_samples.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def ball(n: int, radius: float, center=None) -> np.ndarray:
+    """(n, n, n) float64 field radius - |p - center|: positive inside the ball."""
+    c = np.full(3, (n - 1) / 2) if center is None else np.asarray(center, float)
+    x, y, z = np.meshgrid(*(np.arange(n, dtype=float),) * 3, indexing="ij")
+    return radius - np.sqrt((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2)
+
+
+def edge_key(vertices: np.ndarray, spacing=(1.0, 1.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+    """Sort vertices lying strictly inside grid edges by (edge, position).
+
+    Each vertex of a level no sample equals lies strictly inside one grid edge:
+    two of its index coordinates are integers. Returns the sorted integer
+    keys (N, 4: i, j, k, axis) and the fractional coordinate of each, so two
+    meshes' vertex sets can be compared exactly, edge by edge.
+    """
+    idx = vertices / np.asarray(spacing)
+    frac = np.abs(idx - np.rint(idx))
+    axis = np.argmax(frac, axis=1)
+    base = np.rint(idx)
+    rows = np.arange(len(idx))
+    base[rows, axis] = np.floor(idx[rows, axis])
+    keys = np.column_stack([base.astype(np.int64), axis])
+    order = np.lexsort(keys.T[::-1])
+    return keys[order], idx[rows, axis][order]
+
+
+def edge_use(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Undirected edges of triangles and how many triangles use each."""
+    e = np.concatenate([cells[:, [0, 1]], cells[:, [1, 2]], cells[:, [2, 0]]])
+    e.sort(axis=1)
+    return np.unique(e, axis=0, return_counts=True)
+
+
+def directed_edges_consistent(cells: np.ndarray) -> bool:
+    """True when every directed edge occurs at most once (consistent orientation)."""
+    e = np.concatenate([cells[:, [0, 1]], cells[:, [1, 2]], cells[:, [2, 0]]])
+    return len(np.unique(e, axis=0)) == len(e)
+
+
+def euler_characteristic(vertices_used: int, cells: np.ndarray) -> int:
+    edges, _ = edge_use(cells)
+    return vertices_used - len(edges) + len(cells)
