@@ -36,6 +36,7 @@ app = typer.Typer(
 _MULTI_VALUE = ("--shape", "--spacing", "--origin")
 
 Ambiguity = Enum("Ambiguity", {r.replace("-", "_"): r for r in AMBIGUITY_RULES}, type=str)
+_DEFAULT_AMBIGUITY = Ambiguity(DEFAULT_AMBIGUITY)
 Endian = Enum("Endian", {"little": "little", "big": "big"}, type=str)
 
 # Read options shared by convert and info
@@ -143,7 +144,7 @@ def convert(
     ] = False,
     ambiguity: Annotated[
         Ambiguity, typer.Option(help="Rule for ambiguous cube faces (default as VTK).")
-    ] = Ambiguity(DEFAULT_AMBIGUITY),
+    ] = _DEFAULT_AMBIGUITY,
     nan_as: Annotated[
         float | None, typer.Option(help="Treat NaN/Inf samples as this value (else an error).")
     ] = None,
@@ -176,6 +177,8 @@ def convert(
         **_read_kwargs(input_format, shape, dtype, endian, header_bytes, channel, spacing, origin),
     )
     if not quiet:
+        for note in result.volume.notes:
+            print(f"note: {note}", file=sys.stderr)
         mesh = result.mesh
         kind = "triangles" if mesh.is_triangles else "segments"
         print(
@@ -261,9 +264,9 @@ def _text_histogram(hist, rows: int = 12, width: int = 40) -> list[str]:
     which = np.clip(np.searchsorted(bounds, hist.centers, side="right") - 1, 0, rows - 1)
     counts = np.bincount(which, weights=hist.counts, minlength=rows)
     scale = np.log1p(counts) / max(np.log1p(counts).max(), 1e-12)
+    bars = ["#" * int(round(s * width)) for s in scale]
     return [
-        f"{bounds[r]:>10.4g} .. {bounds[r + 1]:<10.4g} {'#' * int(round(scale[r] * width)):<{width}}"
-        f" {int(counts[r]):,}"
+        f"{bounds[r]:>10.4g} .. {bounds[r + 1]:<10.4g} {bars[r]:<{width}} {int(counts[r]):,}"
         for r in range(rows)
     ]
 

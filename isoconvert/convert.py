@@ -17,7 +17,7 @@ from .writers import output_format, write_mesh
 
 @dataclass
 class ConvertResult:
-    """What :func:`convert` made."""
+    """What :func:`convert` made; ``volume.notes`` says what the reader assumed."""
 
     volume: Volume
     mesh: Mesh
@@ -54,9 +54,6 @@ def convert(
     if Path(output).resolve() == Path(input).resolve():
         raise OutputError(f"{output}: is the input file; choose another output name")
     volume = read_volume(input, format=input_format, spacing=spacing, origin=origin, **read_options)
-    if on_status:
-        for note in volume.notes:
-            on_status(f"{volume.source}: {note}")
     mesh = extract(
         volume,
         level,

@@ -73,8 +73,12 @@ def test_vertices_interpolate_on_bipolar_edges():
     assert np.allclose(mesh.vertices, start + t[:, None] * (end - start), atol=1e-12)
     # every bipolar grid edge carries exactly one vertex
     n_bipolar = sum(
-        int(((np.take(data, range(d - 1), a) >= level)
-             != (np.take(data, range(1, d), a) >= level)).sum())
+        int(
+            (
+                (np.take(data, range(d - 1), a) >= level)
+                != (np.take(data, range(1, d), a) >= level)
+            ).sum()
+        )
         for a, d in enumerate(data.shape)
     )
     assert len(np.unique(ids)) == len(ids) == n_bipolar

@@ -175,8 +175,9 @@ def test_nrrd_not_nrrd(tmp_path):
 def test_nrrd_vector_axis_needs_channel(tmp_path, zyx):
     path = tmp_path / "rgb.nrrd"
     data = np.stack([zyx.T, zyx.T + 1, zyx.T + 2])  # (3, X, Y, Z)
-    nrrd.write(str(path), data, {"kinds": ["vector", "domain", "domain", "domain"]},
-               index_order="F")
+    nrrd.write(
+        str(path), data, {"kinds": ["vector", "domain", "domain", "domain"]}, index_order="F"
+    )
     with pytest.raises(VolumeError, match="--channel 0..2"):
         read_volume(path)
     assert np.array_equal(read_volume(path, channel=1).data, zyx.T + 1)
@@ -187,8 +188,13 @@ def test_nrrd_vector_axis_needs_channel(tmp_path, zyx):
 
 def test_tiff_multipage_with_imagej_spacing(tmp_path, zyx):
     path = tmp_path / "v.tif"
-    tifffile.imwrite(path, zyx, imagej=True, resolution=(1 / 0.5, 1 / 0.25),
-                     metadata={"spacing": 2.0, "unit": "um", "axes": "ZYX"})
+    tifffile.imwrite(
+        path,
+        zyx,
+        imagej=True,
+        resolution=(1 / 0.5, 1 / 0.25),
+        metadata={"spacing": 2.0, "unit": "um", "axes": "ZYX"},
+    )
     vol = read_volume(path)
     assert np.array_equal(vol.data, zyx.T)
     assert np.allclose(vol.spacing, [0.5, 0.25, 2.0])

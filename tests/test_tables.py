@@ -114,8 +114,10 @@ def test_neighbouring_patches_agree_on_the_shared_face(rule):
                 seg_a = _face_segments(a, rule, axis, 1)
                 # shift A's face coordinates into B's frame: offset along axis 1 -> 0
                 seg_a = {
-                    tuple((tuple(o - (1 if k == axis else 0) for k, o in enumerate(off)), ax)
-                          for off, ax in seg)
+                    tuple(
+                        (tuple(o - (1 if k == axis else 0) for k, o in enumerate(off)), ax)
+                        for off, ax in seg
+                    )
                     for seg in seg_a
                 }
                 for rest_b in range(16):

@@ -36,8 +36,9 @@ def test_read_back_with_trimesh(tmp_path, mesh, fmt, ascii):
     tol = 1e-4  # float32 in PLY and STL, relative to coordinates ~100
     if fmt == "stl":
         # STL has no shared vertices: compare triangle by triangle
-        assert np.allclose(corners(back.vertices, back.faces), corners(mesh.vertices, mesh.cells),
-                           atol=tol)
+        assert np.allclose(
+            corners(back.vertices, back.faces), corners(mesh.vertices, mesh.cells), atol=tol
+        )
         return
     assert len(back.vertices) == mesh.n_vertices
     assert np.allclose(back.vertices, mesh.vertices, atol=tol)
@@ -65,8 +66,9 @@ def test_binary_stl_normals_are_unit_or_zero_never_nan(tmp_path):
     verts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0]], float)
     cells = np.array([[0, 1, 2], [0, 1, 3]])  # the second has zero area
     path = write_mesh(Mesh(verts, cells), tmp_path / "d.stl")
-    records = np.frombuffer(path.read_bytes()[84:], dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)),
-                                                          ("a", "<u2")])
+    records = np.frombuffer(
+        path.read_bytes()[84:], dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]
+    )
     assert np.allclose(records["n"], [[0, 0, 1], [0, 0, 0]])
 
 
@@ -85,7 +87,9 @@ def test_failure_while_writing_leaves_nothing(tmp_path, mesh, monkeypatch):
         fh.write(b"half a file")
         raise KeyboardInterrupt
 
-    monkeypatch.setitem(WRITERS._entries, "ply", dataclasses.replace(WRITERS.get("ply"), write=broken))
+    monkeypatch.setitem(
+        WRITERS._entries, "ply", dataclasses.replace(WRITERS.get("ply"), write=broken)
+    )
     with pytest.raises(KeyboardInterrupt):
         write_mesh(mesh, tmp_path / "m.ply")
     assert list(tmp_path.iterdir()) == []

@@ -32,7 +32,8 @@ def dtype_from_name(name: str) -> np.dtype:
     key = _DTYPE_ALIASES.get(name.lower(), name.lower())
     if key not in SUPPORTED_DTYPES:
         raise VolumeError(
-            f"unknown sample type {name!r} for --dtype; choose one of: {', '.join(SUPPORTED_DTYPES)}"
+            f"unknown sample type {name!r} for --dtype; "
+            f"choose one of: {', '.join(SUPPORTED_DTYPES)}"
         )
     return np.dtype(key)
 
@@ -68,15 +69,18 @@ def read_raw(path: Path, options: ReadOptions) -> Volume:
             raise VolumeError(
                 f"{path}: a raw file needs {missing} (or a name like name_256x256x128_uint8.raw)"
             )
+        taken = []
         if shape is None:
             shape = from_name[0]
-            notes.append(f"shape {'x'.join(map(str, shape))} taken from the file name")
+            taken.append(f"shape {'x'.join(map(str, shape))}")
         if dtype_name is None:
             dtype_name = from_name[1]
-            notes.append(f"sample type {dtype_name} taken from the file name")
+            taken.append(f"sample type {dtype_name}")
+        notes.append(f"{' and '.join(taken)} taken from the file name")
     if len(shape) not in (2, 3) or any(int(n) <= 0 for n in shape):
         raise VolumeError(
-            f"{path}: --shape needs 2 or 3 positive sizes (x y [z]), got {' '.join(map(str, shape))}"
+            f"{path}: --shape needs 2 or 3 positive sizes (x y [z]), "
+            f"got {' '.join(map(str, shape))}"
         )
     if options.endian not in ("little", "big"):
         raise VolumeError(f"--endian must be 'little' or 'big', got {options.endian!r}")

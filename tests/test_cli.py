@@ -1,0 +1,294 @@
+"""The command line: results, and one clear line for every kind of bad input."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import trimesh
+from conftest import SAMPLES, ball
+
+from isoconvert.cli import gather_multi_values, main
+
+TORUS = str(SAMPLES / "torus_20x20x20_float32.raw")
+SPHERE = str(SAMPLES / "sphere.nrrd")
+
+
+def run(capsys, *args):
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_one_line_error(code, err, *needles):
+    assert code == 1
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("isoconvert: error: ")
+    assert "Traceback" not in err
+    for needle in needles:
+        assert needle in lines[0], (needle, lines[0])
+
+
+def assert_no_output(folder):
+    assert not [p for p in folder.iterdir() if p.suffix in (".ply", ".stl", ".obj", ".part")]
+
+
+def test_convert_writes_a_closed_mesh(tmp_path, capsys):
+    out = tmp_path / "torus.ply"
+    code, stdout, _ = run(capsys, "convert", TORUS, "--level", "3", "-o", out, "--flip")
+    assert code == 0
+    assert "wrote" in stdout and "triangles" in stdout
+    mesh = trimesh.load(out, process=False)
+    assert mesh.is_watertight and mesh.euler_number == 0 and mesh.volume > 0
+
+
+def test_convert_stl_ascii_and_obj(tmp_path, capsys):
+    for name, extra in (("s.stl", ["--ascii"]), ("s.obj", [])):
+        code, _, _ = run(
+            capsys, "convert", SPHERE, "--level", "127.5", "-o", tmp_path / name, *extra
+        )
+        assert code == 0
+        # STL stores each triangle's corners: let trimesh merge them (process=True)
+        merged = trimesh.load(tmp_path / name, process=name.endswith(".stl"), force="mesh")
+        assert merged.is_watertight and merged.volume > 0
+
+
+def test_level_auto_prints_the_otsu_value(tmp_path, capsys):
+    code, _, err = run(capsys, "convert", SPHERE, "--level", "auto", "-o", tmp_path / "s.ply")
+    assert code == 0 and "Otsu threshold" in err
+
+
+def test_quiet_prints_nothing(tmp_path, capsys):
+    code, out, err = run(capsys, "convert", SPHERE, "-l", "127.5", "-o", tmp_path / "s.ply", "-q")
+    assert code == 0 and out == "" and err == ""
+
+
+def test_shape_spacing_origin_take_several_values(tmp_path, capsys):
+    data = ball(10, 3.0).astype(np.float32)
+    raw = tmp_path / "ball.dat"
+    np.ascontiguousarray(data.T).tofile(raw)
+    out = tmp_path / "b.obj"
+    code, _, _ = run(
+        capsys,
+        "convert",
+        raw,
+        "--shape",
+        10,
+        10,
+        10,
+        "--dtype",
+        "float32",
+        "--spacing",
+        2,
+        2,
+        2,
+        "--origin",
+        -10,
+        0,
+        0.5,
+        "-l",
+        0,
+        "-o",
+        out,
+    )
+    assert code == 0
+    v = trimesh.load(out, process=False).vertices
+    center = v.mean(axis=0)
+    assert np.allclose(center, [-10 + 9, 9, 9.5], atol=0.2)
+    assert gather_multi_values(["--shape", "4", "5", "6", "x.raw"]) == ["--shape", "4,5,6", "x.raw"]
+    assert gather_multi_values(["--shape=4x5x6"]) == ["--shape=4x5x6"]
+
+
+def test_info_text_and_json(capsys):
+    code, out, _ = run(capsys, "info", SPHERE)
+    assert code == 0
+    assert "40 x 40 x 40" in out and "suggested levels: otsu" in out and "histogram" in out
+    code, out, _ = run(capsys, "info", SPHERE, "--json")
+    info = json.loads(out)
+    assert info["shape"] == [40, 40, 40] and info["dtype"] == "uint8"
+    assert info["min"] == 0 and info["max"] == 233
+    assert info["min"] < info["suggested_levels"]["otsu"] < info["max"]
+
+
+def test_formats_lists_the_registries(capsys):
+    code, out, _ = run(capsys, "formats")
+    assert code == 0
+    for name in ("raw", "nrrd", "tiff", "ply", "obj", "stl", "cubes"):
+        assert name in out
+
+
+# --- bad input: one line, non-zero exit, no output ------------------------------
+
+
+def test_missing_input(tmp_path, capsys):
+    code, _, err = run(capsys, "convert", tmp_path / "nope.raw", "-l", 1, "-o", tmp_path / "o.ply")
+    assert_one_line_error(code, err, "nope.raw", "no such file")
+    assert_no_output(tmp_path)
+
+
+def test_raw_size_mismatch(tmp_path, capsys):
+    raw = tmp_path / "v.raw"
+    raw.write_bytes(bytes(100))
+    code, _, err = run(
+        capsys,
+        "convert",
+        raw,
+        "--shape",
+        4,
+        5,
+        6,
+        "--dtype",
+        "uint8",
+        "-l",
+        1,
+        "-o",
+        tmp_path / "o.ply",
+    )
+    assert_one_line_error(code, err, "100 bytes", "needs 120", "--shape")
+    assert_no_output(tmp_path)
+
+
+def test_unknown_dtype(tmp_path, capsys):
+    raw = tmp_path / "v.raw"
+    raw.write_bytes(bytes(120))
+    code, _, err = run(
+        capsys,
+        "convert",
+        raw,
+        "--shape",
+        4,
+        5,
+        6,
+        "--dtype",
+        "float128",
+        "-l",
+        1,
+        "-o",
+        tmp_path / "o.ply",
+    )
+    assert_one_line_error(code, err, "float128", "uint8")
+    assert_no_output(tmp_path)
+
+
+@pytest.mark.parametrize("level", ["300", "0", "-5"])
+def test_level_outside_the_range_gives_the_range(tmp_path, capsys, level):
+    code, _, err = run(capsys, "convert", SPHERE, "-l", level, "-o", tmp_path / "o.ply")
+    assert_one_line_error(code, err, "outside the data range", "0 < level <= 233")
+    assert_no_output(tmp_path)
+
+
+def test_level_not_a_number(tmp_path, capsys):
+    code, _, err = run(capsys, "convert", SPHERE, "-l", "high", "-o", tmp_path / "o.ply")
+    assert_one_line_error(code, err, "'high'", "auto")
+
+
+def write_raw(tmp_path, data, name="v"):
+    path = tmp_path / f"{name}_{'x'.join(map(str, data.shape))}_{data.dtype.name}.raw"
+    np.ascontiguousarray(data.T).tofile(path)
+    return path
+
+
+def test_constant_volume_has_no_surface(tmp_path, capsys):
+    raw = write_raw(tmp_path, np.full((4, 4, 4), 7, np.uint8))
+    code, _, err = run(capsys, "convert", raw, "-l", 7, "-o", tmp_path / "o.ply")
+    assert_one_line_error(code, err, "constant", "7")
+    assert_no_output(tmp_path)
+
+
+def test_nan_is_an_error_unless_nan_as(tmp_path, capsys):
+    data = ball(8, 2.5).astype(np.float32)
+    data[0, 0, 0] = np.nan
+    data[1, 0, 0] = np.inf
+    raw = write_raw(tmp_path, data)
+    code, _, err = run(capsys, "convert", raw, "-l", 0, "-o", tmp_path / "o.ply")
+    assert_one_line_error(code, err, "2 samples are NaN or infinite", "--nan-as")
+    assert_no_output(tmp_path)
+    code, _, _ = run(capsys, "convert", raw, "-l", 0, "-o", tmp_path / "o.ply", "--nan-as", -10)
+    assert code == 0
+    assert trimesh.load(tmp_path / "o.ply", process=False).is_watertight
+
+
+def test_dimension_of_one(tmp_path, capsys):
+    raw = write_raw(tmp_path, np.arange(20, dtype=np.uint8).reshape(4, 5, 1))
+    code, _, err = run(capsys, "convert", raw, "-l", 5, "-o", tmp_path / "o.ply")
+    assert_one_line_error(code, err, "(4, 5, 1)", "at least 2 samples")
+    assert_no_output(tmp_path)
+
+
+def test_2d_input_to_cubes_says_what_to_do(tmp_path, capsys):
+    raw = write_raw(tmp_path, np.arange(20, dtype=np.uint8).reshape(4, 5))
+    code, _, err = run(capsys, "convert", raw, "-l", 5, "-o", tmp_path / "o.ply")
+    assert_one_line_error(code, err, "3D volume", "2D")
+
+
+def test_unwritable_output_folder(tmp_path, capsys):
+    # /proc refuses new files even to root
+    code, _, err = run(capsys, "convert", SPHERE, "-l", 127.5, "-o", "/proc/isoconvert-test.ply")
+    assert_one_line_error(code, err, "/proc/isoconvert-test.ply", "cannot")
+    if os.geteuid() != 0:  # root ignores permission bits
+        locked = tmp_path / "locked"
+        locked.mkdir(mode=0o555)
+        code, _, err = run(capsys, "convert", SPHERE, "-l", 127.5, "-o", locked / "o.ply")
+        assert_one_line_error(code, err, "permission denied")
+
+
+def test_missing_output_folder(tmp_path, capsys):
+    code, _, err = run(capsys, "convert", SPHERE, "-l", 127.5, "-o", tmp_path / "a" / "o.ply")
+    assert_one_line_error(code, err, "does not exist")
+
+
+def test_unknown_output_extension_lists_formats(tmp_path, capsys):
+    code, _, err = run(capsys, "convert", SPHERE, "-l", 127.5, "-o", tmp_path / "o.vtk")
+    assert_one_line_error(code, err, "'.vtk'", "ply (.ply)", "obj (.obj)", "stl (.stl)")
+    assert_no_output(tmp_path)
+
+
+def test_existing_output_is_kept_without_force(tmp_path, capsys):
+    out = tmp_path / "o.ply"
+    out.write_bytes(b"precious")
+    code, _, err = run(capsys, "convert", SPHERE, "-l", 127.5, "-o", out)
+    assert_one_line_error(code, err, "already exists", "--force")
+    assert out.read_bytes() == b"precious"
+    assert run(capsys, "convert", SPHERE, "-l", 127.5, "-o", out, "--force")[0] == 0
+    assert out.read_bytes().startswith(b"ply")
+
+
+def test_output_equal_to_input(tmp_path, capsys):
+    raw = write_raw(tmp_path, ball(6, 2).astype(np.float32))
+    code, _, err = run(capsys, "convert", raw, "-l", 0, "-o", raw, "--format", "ply", "--force")
+    assert_one_line_error(code, err, "is the input")
+    assert raw.stat().st_size == 6**3 * 4
+
+
+def test_subprocess_no_traceback_and_debug_shows_one(tmp_path):
+    cmd = [
+        sys.executable,
+        "-m",
+        "isoconvert",
+        "convert",
+        str(tmp_path / "x.raw"),
+        "-l",
+        "1",
+        "-o",
+        str(tmp_path / "o.ply"),
+    ]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    assert proc.returncode == 1
+    assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    proc = subprocess.run(cmd + ["--debug"], capture_output=True, text=True)
+    assert proc.returncode != 0 and "Traceback" in proc.stderr
+    assert "InputNotFoundError" in proc.stderr
+
+
+def test_help_and_info_do_not_import_numba():
+    code = (
+        f"import sys; from isoconvert.cli import main; main(['info', {SPHERE!r}]); "
+        "assert 'numba' not in sys.modules, 'numba imported'"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
