@@ -34,7 +34,7 @@ def test_otsu_on_float_data_is_close_to_scikit_image():
     data = read_volume(dataset("hydrogen_vtk_64x64x64_float32.raw")).data
     ours = otsu_level(histogram(data))
     theirs = filters.threshold_otsu(np.asarray(data), nbins=1024)
-    assert ours == pytest.approx(theirs, abs=(data.max() - data.min()) / 1024)
+    assert ours == pytest.approx(theirs, abs=float(data.max() - data.min()) / 1024)
 
 
 def test_percentiles_match_numpy_and_stay_inside_the_range():
