@@ -17,7 +17,7 @@ import typer
 
 from . import __version__
 from .errors import IsoconvertError, VolumeError
-from .extract import AMBIGUITY_RULES, DEFAULT_AMBIGUITY, EXTRACTORS
+from .extract import EXTRACTORS, SQUARE_AMBIGUITY_RULES
 from .readers import READERS
 from .writers import WRITERS
 
@@ -35,8 +35,8 @@ app = typer.Typer(
 # --shape takes 2 or 3).
 _MULTI_VALUE = ("--shape", "--spacing", "--origin")
 
-Ambiguity = Enum("Ambiguity", {r.replace("-", "_"): r for r in AMBIGUITY_RULES}, type=str)
-_DEFAULT_AMBIGUITY = Ambiguity(DEFAULT_AMBIGUITY)
+Ambiguity = Enum("Ambiguity", {r.replace("-", "_"): r for r in SQUARE_AMBIGUITY_RULES}, type=str)
+Axis = Enum("Axis", {"x": "x", "y": "y", "z": "z"}, type=str)
 Endian = Enum("Endian", {"little": "little", "big": "big"}, type=str)
 
 # Read options shared by convert and info
@@ -129,8 +129,16 @@ def convert(
         str, typer.Option("--level", "-l", help="Isovalue, or 'auto' for Otsu's threshold.")
     ],
     method: Annotated[
-        str, typer.Option(help=f"Extraction method: {', '.join(EXTRACTORS.names())}.")
-    ] = "cubes",
+        str | None,
+        typer.Option(
+            help=f"Extraction method: {', '.join(EXTRACTORS.names())} "
+            "(default: squares for 2D images, cubes for 3D; see `isoconvert methods`)."
+        ),
+    ] = None,
+    axis: Annotated[
+        Axis | None,
+        typer.Option(help="squares on a 3D volume: contour every slice across this axis."),
+    ] = None,
     format: Annotated[
         str | None,
         typer.Option(
@@ -143,8 +151,12 @@ def convert(
         bool, typer.Option("--flip", help="Reverse orientation (normals toward higher values).")
     ] = False,
     ambiguity: Annotated[
-        Ambiguity, typer.Option(help="Rule for ambiguous cube faces (default as VTK).")
-    ] = _DEFAULT_AMBIGUITY,
+        Ambiguity | None,
+        typer.Option(
+            help="Rule for ambiguous faces (default separate-positive, as VTK and "
+            "scikit-image); asymptotic: squares only."
+        ),
+    ] = None,
     nan_as: Annotated[
         float | None, typer.Option(help="Treat NaN/Inf samples as this value (else an error).")
     ] = None,
@@ -171,7 +183,8 @@ def convert(
         ascii=ascii,
         force=force,
         flip=flip,
-        ambiguity=ambiguity.value,
+        ambiguity=ambiguity.value if ambiguity else None,
+        axis=axis.value if axis else None,
         nan_as=nan_as,
         on_status=_status(quiet),
         **_read_kwargs(input_format, shape, dtype, endian, header_bytes, channel, spacing, origin),
@@ -181,6 +194,7 @@ def convert(
             print(f"note: {note}", file=sys.stderr)
         mesh = result.mesh
         kind = "triangles" if mesh.is_triangles else "segments"
+        kind = f"{kind}, {mesh.info['method']}"
         print(
             f"wrote {result.output}: {mesh.n_vertices:,} vertices, {mesh.n_cells:,} {kind} "
             f"(level {mesh.info['level']:g}, {time.perf_counter() - start:.2f} s)"
@@ -281,8 +295,22 @@ def formats() -> None:
     for name, writer in WRITERS.items():
         print(f"  {name:<6} {' '.join(writer.suffixes):<18} {writer.summary}")
     print("methods:")
-    for name, extractor in EXTRACTORS.items():
-        print(f"  {name:<6} {extractor.summary}")
+    _print_methods()
+
+
+@app.command()
+def methods() -> None:
+    """List extraction methods (built-in and installed plugins)."""
+    _print_methods()
+
+
+def _print_methods() -> None:
+    for name in EXTRACTORS.names():
+        try:
+            summary = EXTRACTORS.get(name).summary
+        except IsoconvertError as exc:
+            summary = f"(broken plugin: {exc})"
+        print(f"  {name:<8} {summary}")
 
 
 def gather_multi_values(argv: list[str]) -> list[str]:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .atomic import check_output
 from .errors import OutputError
-from .extract import DEFAULT_AMBIGUITY, extract
+from .extract import extract
 from .mesh import Mesh
 from .readers import read_volume
 from .volume import Volume
@@ -29,12 +29,13 @@ def convert(
     output: str | Path,
     level: float | str,
     *,
-    method: str = "cubes",
+    method: str | None = None,
     format: str | None = None,
     ascii: bool = False,
     force: bool = False,
     flip: bool = False,
-    ambiguity: str = DEFAULT_AMBIGUITY,
+    ambiguity: str | None = None,
+    axis: str | None = None,
     nan_as: float | None = None,
     input_format: str | None = None,
     spacing: tuple[float, ...] | None = None,
@@ -54,6 +55,7 @@ def convert(
     if Path(output).resolve() == Path(input).resolve():
         raise OutputError(f"{output}: is the input file; choose another output name")
     volume = read_volume(input, format=input_format, spacing=spacing, origin=origin, **read_options)
+    options = {} if axis is None else {"axis": axis}
     mesh = extract(
         volume,
         level,
@@ -62,6 +64,7 @@ def convert(
         ambiguity=ambiguity,
         nan_as=nan_as,
         on_status=on_status,
+        **options,
     )
     path = write_mesh(mesh, output, format=writer.name, ascii=ascii, force=force)
     return ConvertResult(volume, mesh, path)

@@ -73,3 +73,55 @@ class Mesh:
         c = v.mean(axis=0) if len(v) else np.zeros(3)
         a, b, d = v[t[:, 0]] - c, v[t[:, 1]] - c, v[t[:, 2]] - c
         return float(np.einsum("ij,ij->i", a, np.cross(b, d)).sum() / 6.0)
+
+
+def polylines(segments: np.ndarray) -> list[tuple[np.ndarray, bool]]:
+    """Chain directed segments into polylines.
+
+    Parameters
+    ----------
+    segments : (C, 2) int
+        Segments as vertex indices, each running from its first to its second.
+
+    Returns
+    -------
+    list of ((n,) int64, bool)
+        Vertex indices of each polyline and whether it is closed (its last
+        vertex joins its first, which is not repeated). A vertex where more
+        than one segment starts or ends (non-manifold) ends the polylines
+        through it.
+    """
+    segments = np.asarray(segments, dtype=np.int64)
+    starts, ends = segments[:, 0], segments[:, 1]
+    out_degree = np.bincount(starts, minlength=0)
+    in_degree = np.bincount(ends, minlength=0)
+    size = max(len(out_degree), len(in_degree))
+    out_degree = np.pad(out_degree, (0, size - len(out_degree)))
+    in_degree = np.pad(in_degree, (0, size - len(in_degree)))
+    following = {int(a): int(b) for a, b in segments if out_degree[a] == 1 and in_degree[b] == 1}
+    result: list[tuple[np.ndarray, bool]] = []
+    used = set()
+    # open chains start where nothing (or more than one thing) leads in
+    for a, b in segments.tolist():
+        if (a, b) in used or (in_degree[a] == 1 and out_degree[a] == 1):
+            continue
+        chain = [a, b]
+        used.add((a, b))
+        while b in following and (b, following[b]) not in used and in_degree[b] == 1:
+            used.add((b, following[b]))
+            b = following[b]
+            chain.append(b)
+        result.append((np.array(chain, dtype=np.int64), False))
+    # what is left are closed loops through regular vertices
+    for a, b in segments.tolist():
+        if (a, b) in used:
+            continue
+        chain = [a]
+        used.add((a, b))
+        while b != a:
+            chain.append(b)
+            nxt = following[b]
+            used.add((b, nxt))
+            b = nxt
+        result.append((np.array(chain, dtype=np.int64), True))
+    return result

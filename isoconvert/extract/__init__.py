@@ -1,54 +1,127 @@
 """Extractors: one module per method and the table of built-ins below.
 
-An extractor is a function ``(volume, level, *, flip, ambiguity, nan_as,
-on_status) -> Mesh`` taking a validated :class:`~isoconvert.volume.Volume` of
-its dimension and returning vertices in world units with the orientation
-convention of ARCHITECTURE.md.
+Contract (for built-ins and plugins alike): an extractor is a function
+
+    run(volume, level, *, flip, ambiguity, nan_as, on_status, **options) -> Mesh
+
+that receives a :class:`~isoconvert.volume.Volume` (not yet validated: use
+:func:`isoconvert.extract.prepare.kernel_array` and ``check_level``) and a float
+level, and returns a :class:`~isoconvert.mesh.Mesh` with vertices ``(V, 3)`` in
+world units (``volume.index_to_world``) and cells ``(C, 3)`` triangles whose
+normals point from values >= level to values < level, or ``(C, 2)`` segments
+with the higher values on their left. ``flip`` reverses that.
+
+Third-party extractors register under the entry-point group
+``isoconvert.extractors``: the entry point's name is the method name and it
+points to an :class:`Extractor` (or to a bare ``run`` function, taken as a 3D
+method described by its docstring's first line). Built-in names win.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
+import numpy as np
+
+from ..errors import IsoconvertError
 from ..mesh import Mesh
 from ..registry import Registry
 from ..volume import Volume
 from .cubes import marching_cubes
+from .squares import SQUARE_AMBIGUITY_RULES, marching_squares
 from .tables import AMBIGUITY_RULES, DEFAULT_AMBIGUITY
+from .tetra import marching_tetrahedra
+
+PLUGIN_GROUP = "isoconvert.extractors"
 
 
 @dataclass(frozen=True)
 class Extractor:
-    """An isosurface method."""
+    """An isosurface (or isocontour) method.
+
+    Attributes
+    ----------
+    name : str
+    summary : str
+        One line for ``isoconvert methods``.
+    ndims : tuple of int
+        Volume dimensions it accepts.
+    run : callable
+        The function described in the module docstring.
+    ambiguity : tuple of str
+        Ambiguity rules it accepts (the first is its default).
+    options : frozenset of str
+        Extra keyword options it takes (e.g. ``axis``).
+    """
 
     name: str
     summary: str
-    ndim: int
+    ndims: tuple[int, ...]
     run: Callable[..., Mesh]
+    ambiguity: tuple[str, ...] = (DEFAULT_AMBIGUITY,)
+    options: frozenset[str] = field(default_factory=frozenset)
 
 
-EXTRACTORS: Registry[Extractor] = Registry("extraction method")
+def _from_plugin(name: str, obj: object) -> Extractor:
+    if isinstance(obj, Extractor):
+        return obj
+    if callable(obj):
+        doc = (getattr(obj, "__doc__", None) or f"plugin {name}").strip().splitlines()[0]
+        return Extractor(name, doc, (3,), obj)
+    raise IsoconvertError(f"extractor plugin {name!r} is neither an Extractor nor a function")
+
+
+EXTRACTORS: Registry[Extractor] = Registry(
+    "extraction method", plugin_group=PLUGIN_GROUP, adapt=_from_plugin
+)
 EXTRACTORS.register(
     "cubes",
     Extractor(
         "cubes",
-        "Marching Cubes (3D): triangles, watertight on closed surfaces; table derived in code",
-        3,
+        "Marching Cubes (3D): triangles; watertight closed surfaces; table derived in code",
+        (3,),
         marching_cubes,
+        AMBIGUITY_RULES,
     ),
 )
+EXTRACTORS.register(
+    "tetra",
+    Extractor(
+        "tetra",
+        "Marching Tetrahedra (3D): six tetrahedra per cube, no ambiguous cases, more triangles",
+        (3,),
+        marching_tetrahedra,
+    ),
+)
+EXTRACTORS.register(
+    "squares",
+    Extractor(
+        "squares",
+        "Marching Squares (2D images, or every slice of a 3D volume across --axis): segments",
+        (2, 3),
+        marching_squares,
+        SQUARE_AMBIGUITY_RULES,
+        frozenset({"axis"}),
+    ),
+)
+
+
+def default_method(volume: Volume) -> str:
+    """squares for 2D images, cubes for 3D volumes."""
+    return "squares" if volume.ndim == 2 else "cubes"
 
 
 def extract(
     volume: Volume,
     level: float | str,
     *,
-    method: str = "cubes",
+    method: str | None = None,
     flip: bool = False,
-    ambiguity: str = DEFAULT_AMBIGUITY,
+    ambiguity: str | None = None,
     nan_as: float | None = None,
     on_status: Callable[[str], None] | None = None,
+    **options,
 ) -> Mesh:
     """Extract the isosurface (or isocontour) of ``volume`` at ``level``.
 
@@ -57,33 +130,72 @@ def extract(
     volume : Volume
     level : float or "auto"
         The isovalue; "auto" takes Otsu's threshold of the volume's histogram.
-    method : str
-        Name of an extractor in :data:`EXTRACTORS`.
+    method : str or None
+        Name in :data:`EXTRACTORS` (``cubes``, ``tetra``, ``squares`` or a
+        plugin); None picks squares for 2D and cubes for 3D.
     flip : bool
         Reverse the orientation.
-    ambiguity : str
-        Rule for ambiguous faces, one of :data:`AMBIGUITY_RULES`.
+    ambiguity : str or None
+        Rule for ambiguous faces, one the method accepts; None is its default.
     nan_as : float or None
         Treat NaN/Inf samples as this value; None makes them an error.
     on_status : callable or None
         Receives one-line notices for the user.
+    **options
+        Method-specific options (``axis`` for squares on 3D volumes).
 
     Returns
     -------
     Mesh
     """
-    extractor = EXTRACTORS.get(method)
-    if ambiguity not in AMBIGUITY_RULES:
-        from ..errors import IsoconvertError
-
+    name = method or default_method(volume)
+    extractor = EXTRACTORS.get(name)
+    if volume.ndim not in extractor.ndims:
+        other = "squares" if volume.ndim == 2 else "cubes or tetra"
         raise IsoconvertError(
-            f"unknown ambiguity rule {ambiguity!r}; choose one of: {', '.join(AMBIGUITY_RULES)}"
+            f"{volume.source}: {name} needs a {' or '.join(f'{d}D' for d in extractor.ndims)} "
+            f"volume, got shape {volume.shape}; use --method {other}"
         )
+    if ambiguity is None:
+        ambiguity = extractor.ambiguity[0]
+    if ambiguity not in extractor.ambiguity:
+        raise IsoconvertError(
+            f"{name} takes --ambiguity {', '.join(extractor.ambiguity)}; got {ambiguity!r}"
+        )
+    stray = set(options) - extractor.options
+    if stray:
+        raise IsoconvertError(f"{name} has no option {', '.join(sorted(stray))}")
     if isinstance(level, str):
         level = resolve_level(volume, level, on_status)
-    return extractor.run(
-        volume, level, flip=flip, ambiguity=ambiguity, nan_as=nan_as, on_status=on_status
+    mesh = extractor.run(
+        volume,
+        float(level),
+        flip=flip,
+        ambiguity=ambiguity,
+        nan_as=nan_as,
+        on_status=on_status,
+        **options,
     )
+    _check_result(name, mesh)
+    return mesh
+
+
+def _check_result(name: str, mesh: object) -> None:
+    """A plugin's result must keep the Mesh contract before a writer sees it."""
+    ok = (
+        isinstance(mesh, Mesh)
+        and mesh.vertices.ndim == 2
+        and mesh.vertices.shape[1] == 3
+        and mesh.cells.ndim == 2
+        and mesh.cells.shape[1] in (2, 3)
+        and (
+            mesh.cells.size == 0
+            or (0 <= mesh.cells.min() and mesh.cells.max() < len(mesh.vertices))
+        )
+    )
+    if not ok:
+        raise IsoconvertError(f"extractor {name!r} returned something that is not a valid Mesh")
+    mesh.cells = np.asarray(mesh.cells, dtype=np.int64)
 
 
 def resolve_level(volume: Volume, level: str, on_status: Callable[[str], None] | None) -> float:
@@ -102,4 +214,13 @@ def resolve_level(volume: Volume, level: str, on_status: Callable[[str], None] |
         raise LevelError(f"--level must be a number or 'auto', got {level!r}") from None
 
 
-__all__ = ["EXTRACTORS", "Extractor", "extract", "AMBIGUITY_RULES", "DEFAULT_AMBIGUITY"]
+__all__ = [
+    "AMBIGUITY_RULES",
+    "DEFAULT_AMBIGUITY",
+    "EXTRACTORS",
+    "PLUGIN_GROUP",
+    "SQUARE_AMBIGUITY_RULES",
+    "Extractor",
+    "default_method",
+    "extract",
+]

@@ -10,6 +10,7 @@ from pathlib import Path
 from ..errors import FormatError, InputNotFoundError, VolumeError
 from ..registry import Registry
 from ..volume import Volume
+from .image import IMAGE_SUFFIXES, read_image
 from .nrrd import read_nrrd
 from .options import ReadOptions
 from .raw import read_raw
@@ -60,6 +61,16 @@ READERS.register(
         read_tiff,
         frozenset({"channel"}),
         stacks=True,
+    ),
+)
+READERS.register(
+    "image",
+    Reader(
+        "image",
+        "2D images (PNG, JPEG, BMP, GIF) via Pillow; colour becomes gray unless --channel",
+        IMAGE_SUFFIXES,
+        read_image,
+        frozenset({"channel"}),
     ),
 )
 

@@ -14,6 +14,7 @@ from ..registry import Registry
 from .obj import write_obj
 from .ply import write_ply
 from .stl import write_stl
+from .svg import write_svg
 
 
 @dataclass(frozen=True)
@@ -26,24 +27,36 @@ class Writer:
     write: Callable[[Mesh, BinaryIO, bool], None]
     #: whether the format has a binary form (``ascii=False``)
     has_binary: bool
+    #: cell sizes it can hold: 3 (triangles), 2 (segments)
+    cell_sizes: frozenset[int] = frozenset({2, 3})
+    #: cell sizes it can hold: 3 (triangles), 2 (segments)
+    cell_sizes: frozenset[int] = frozenset({2, 3})
 
 
 WRITERS: Registry[Writer] = Registry("output format")
-WRITERS.register(
-    "ply",
+_TRIANGLES = frozenset({3})
+_SEGMENTS = frozenset({2})
+for _writer in (
     Writer("ply", "Stanford PLY, indexed; binary (default) or --ascii", (".ply",), write_ply, True),
-)
-WRITERS.register("obj", Writer("obj", "Wavefront OBJ, indexed; text", (".obj",), write_obj, False))
-WRITERS.register(
-    "stl",
+    Writer("obj", "Wavefront OBJ, indexed; text", (".obj",), write_obj, False),
     Writer(
         "stl",
         "STL, one record per triangle; binary (default) or --ascii",
         (".stl",),
         write_stl,
         True,
+        _TRIANGLES,
     ),
-)
+    Writer(
+        "svg",
+        "SVG picture of 2D contours (squares on a 2D image)",
+        (".svg",),
+        write_svg,
+        False,
+        _SEGMENTS,
+    ),
+):
+    WRITERS.register(_writer.name, _writer)
 
 
 def output_format(path: str | Path, format: str | None = None) -> Writer:
@@ -83,6 +96,11 @@ def write_mesh(
         Overwrite an existing file.
     """
     writer = output_format(path, format)
+    size = mesh.cells.shape[1]
+    if size not in writer.cell_sizes:
+        kind = {2: "contour segments", 3: "triangles"}.get(size, f"{size}-vertex cells")
+        fits = [n for n, w in WRITERS.items() if size in w.cell_sizes]
+        raise FormatError(f"{path}: {writer.name} cannot hold {kind}; write {' or '.join(fits)}")
     check_output(path, force)
     with atomic_output(path, force) as fh:
         writer.write(mesh, fh, ascii or not writer.has_binary)
