@@ -36,15 +36,16 @@ def ball(n: int, radius: float, center=None) -> np.ndarray:
     return radius - np.sqrt((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2)
 
 
-def edge_key(vertices: np.ndarray, spacing=(1.0, 1.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+def edge_key(vertices: np.ndarray, spacing=None) -> tuple[np.ndarray, np.ndarray]:
     """Sort vertices lying strictly inside grid edges by (edge, position).
 
     Each vertex of a level no sample equals lies strictly inside one grid edge:
-    two of its index coordinates are integers. Returns the sorted integer
-    keys (N, 4: i, j, k, axis) and the fractional coordinate of each, so two
-    meshes' vertex sets can be compared exactly, edge by edge.
+    all but one of its index coordinates are integers. Returns the sorted
+    integer keys (N, ndim + 1: indices of the edge's lower end, axis) and the
+    fractional coordinate of each, so two meshes' vertex sets can be compared
+    exactly, edge by edge.
     """
-    idx = vertices / np.asarray(spacing)
+    idx = vertices / (1.0 if spacing is None else np.asarray(spacing))
     frac = np.abs(idx - np.rint(idx))
     axis = np.argmax(frac, axis=1)
     base = np.rint(idx)

@@ -222,7 +222,9 @@ def test_dimension_of_one(tmp_path, capsys):
 
 def test_2d_input_to_cubes_says_what_to_do(tmp_path, capsys):
     raw = write_raw(tmp_path, np.arange(20, dtype=np.uint8).reshape(4, 5))
-    code, _, err = run(capsys, "convert", raw, "-l", 5, "-o", tmp_path / "o.ply", "--method", "cubes")
+    code, _, err = run(
+        capsys, "convert", raw, "-l", 5, "-o", tmp_path / "o.ply", "--method", "cubes"
+    )
     assert_one_line_error(code, err, "3D volume", "--method squares")
     assert_no_output(tmp_path)
     # without --method, a 2D image is contoured with squares
