@@ -9,6 +9,7 @@ import numpy as np
 from ..mesh import Mesh
 from ..volume import Volume
 from .jit import compile_notice
+from .placement import finish_mesh
 from .prepare import check_level, kernel_array
 from .tables import DEFAULT_AMBIGUITY, EDGE_AXIS, EDGE_BASE, marching_cubes_table
 
@@ -60,26 +61,3 @@ def marching_cubes(
         tris = np.empty((n_tri, 3), dtype=np.int64)
         fill_cubes(arr, level, counts, table, EDGE_BASE, EDGE_AXIS, verts, edge_ids, tris)
     return finish_mesh(volume, verts, tris, edge_ids, flip, method="cubes", level=level)
-
-
-def finish_mesh(
-    volume: Volume,
-    verts: np.ndarray,
-    cells: np.ndarray,
-    edge_ids: np.ndarray,
-    flip: bool,
-    method: str,
-    level: float,
-) -> Mesh:
-    """Move index-space vertices to world space and settle the orientation.
-
-    A left-handed index-to-world map (negative determinant, as some NRRD
-    ``space directions`` are) mirrors the surface; the triangles are reversed
-    then, so normals still point from the positive to the negative side.
-    """
-    mirrored = np.linalg.det(volume.affine) < 0
-    volume.index_to_world(verts)
-    if mirrored != flip:
-        cells = cells[:, ::-1].copy()
-    info = {"method": method, "level": level, "source": volume.source, "flip": flip}
-    return Mesh(verts, cells, edge_ids, info)

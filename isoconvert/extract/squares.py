@@ -14,8 +14,8 @@ import numpy as np
 from ..errors import IsoconvertError
 from ..mesh import Mesh
 from ..volume import Volume
-from .cubes import finish_mesh
 from .jit import compile_notice
+from .placement import finish_mesh
 from .prepare import check_level, kernel_array
 from .tables import AMBIGUITY_RULES, DEFAULT_AMBIGUITY, marching_squares_table
 
