@@ -34,6 +34,9 @@ from .tables import AMBIGUITY_RULES, DEFAULT_AMBIGUITY
 from .tetra import marching_tetrahedra
 
 PLUGIN_GROUP = "isoconvert.extractors"
+#: The vertex offset ``--no-degenerate`` uses: vertices keep a thousandth of
+#: their edge's length from grid vertices.
+NO_DEGENERATE_OFFSET = 1e-3
 
 
 @dataclass(frozen=True)
@@ -83,6 +86,7 @@ EXTRACTORS.register(
         (3,),
         marching_cubes,
         AMBIGUITY_RULES,
+        frozenset({"vertex_offset"}),
     ),
 )
 EXTRACTORS.register(
@@ -92,6 +96,7 @@ EXTRACTORS.register(
         "Marching Tetrahedra (3D): six tetrahedra per cube, no ambiguous cases, more triangles",
         (3,),
         marching_tetrahedra,
+        options=frozenset({"vertex_offset"}),
     ),
 )
 EXTRACTORS.register(
@@ -102,7 +107,7 @@ EXTRACTORS.register(
         (2, 3),
         marching_squares,
         SQUARE_AMBIGUITY_RULES,
-        frozenset({"axis"}),
+        frozenset({"axis", "vertex_offset"}),
     ),
 )
 
@@ -142,7 +147,10 @@ def extract(
     on_status : callable or None
         Receives one-line notices for the user.
     **options
-        Method-specific options (``axis`` for squares on 3D volumes).
+        Method-specific options: ``axis`` (squares on 3D volumes),
+        ``vertex_offset`` (built-ins: keep vertices this fraction of their edge
+        away from grid vertices, so that a level equal to grid values makes no
+        zero-length edges; :data:`NO_DEGENERATE_OFFSET` is the CLI's choice).
 
     Returns
     -------
@@ -218,6 +226,7 @@ __all__ = [
     "AMBIGUITY_RULES",
     "DEFAULT_AMBIGUITY",
     "EXTRACTORS",
+    "NO_DEGENERATE_OFFSET",
     "PLUGIN_GROUP",
     "SQUARE_AMBIGUITY_RULES",
     "Extractor",

@@ -10,7 +10,7 @@ from ..mesh import Mesh
 from ..volume import Volume
 from .jit import compile_notice
 from .placement import finish_mesh
-from .prepare import check_level, kernel_array
+from .prepare import check_level, check_vertex_offset, kernel_array
 from .tables import DEFAULT_AMBIGUITY, EDGE_AXIS, EDGE_BASE, marching_cubes_table
 
 
@@ -21,6 +21,7 @@ def marching_cubes(
     flip: bool = False,
     ambiguity: str = DEFAULT_AMBIGUITY,
     nan_as: float | None = None,
+    vertex_offset: float = 0.0,
     on_status: Callable[[str], None] | None = None,
 ) -> Mesh:
     """Extract the isosurface of a 3D volume with Marching Cubes.
@@ -38,6 +39,10 @@ def marching_cubes(
         or "separate-negative"; see :mod:`isoconvert.extract.tables`.
     nan_as : float or None
         Treat NaN/Inf samples as this value; None makes them an error.
+    vertex_offset : float
+        Keep every vertex at least this fraction of its edge's length away from
+        the edge's ends (0 <= f < 0.5). With f > 0, a level equal to grid values
+        gives no zero-length edges (see :func:`check_vertex_offset`).
     on_status : callable or None
         Receives one-line notices (e.g. that numba is compiling).
 
@@ -50,6 +55,7 @@ def marching_cubes(
     """
     arr, stats = kernel_array(volume, 3, "cubes", nan_as=nan_as, on_status=on_status)
     level = check_level(level, stats, volume.source)
+    offset = check_vertex_offset(vertex_offset)
     counts, table = marching_cubes_table(ambiguity)
     notice = f"compiling the Marching Cubes kernel for {arr.dtype} data (first run only)"
     with compile_notice(on_status, notice):
@@ -59,5 +65,5 @@ def marching_cubes(
         verts = np.empty((n_vert, 3), dtype=np.float64)
         edge_ids = np.empty(n_vert, dtype=np.int64)
         tris = np.empty((n_tri, 3), dtype=np.int64)
-        fill_cubes(arr, level, counts, table, EDGE_BASE, EDGE_AXIS, verts, edge_ids, tris)
+        fill_cubes(arr, level, offset, counts, table, EDGE_BASE, EDGE_AXIS, verts, edge_ids, tris)
     return finish_mesh(volume, verts, tris, edge_ids, flip, method="cubes", level=level)

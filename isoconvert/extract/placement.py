@@ -27,5 +27,16 @@ def finish_mesh(
     volume.index_to_world(verts)
     if mirrored != flip:
         cells = cells[:, ::-1].copy()
-    info = {"method": method, "level": level, "source": volume.source, "flip": flip}
+    info = {
+        "method": method,
+        "level": level,
+        "source": volume.source,
+        "flip": flip,
+        # the grid, so checks can tell the grid's boundary from holes
+        "grid": {
+            "shape": list(volume.shape),
+            "origin": volume.origin.tolist(),
+            "affine": volume.affine.tolist(),
+        },
+    }
     return Mesh(verts, cells, edge_ids, info)

@@ -117,3 +117,22 @@ def check_level(level: float, stats: ValueRange, src: str) -> float:
             f"{stats.min:g} < level <= {stats.max:g} (`isoconvert info` suggests some)"
         )
     return level
+
+
+def check_vertex_offset(offset: float) -> float:
+    """Validate the fraction of an edge that vertices keep from its ends.
+
+    With the sign rule (positive when value >= level) the configurations at a
+    level equal to grid values are those of a level a hair below it, so the
+    mesh is combinatorially what a generic level gives: a closed 2-manifold for
+    closed surfaces. Only the geometry degenerates: a vertex whose edge starts
+    at a grid vertex with exactly the level sits on that grid vertex (t = 0), and
+    vertices of several edges coincide there (zero-length edges, book sections
+    2.2.4 and 2.3.4). Clamping t to [f, 1 - f] moves each such vertex a fraction f
+    along its own edge; vertices on different grid edges are then distinct
+    points, so no edge has length zero, and the connectivity is unchanged.
+    """
+    offset = float(offset)
+    if not 0.0 <= offset < 0.5:
+        raise VolumeError(f"the vertex offset must be in [0, 0.5), got {offset:g}")
+    return offset

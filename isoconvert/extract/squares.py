@@ -16,7 +16,7 @@ from ..mesh import Mesh
 from ..volume import Volume
 from .jit import compile_notice
 from .placement import finish_mesh
-from .prepare import check_level, kernel_array
+from .prepare import check_level, check_vertex_offset, kernel_array
 from .tables import AMBIGUITY_RULES, DEFAULT_AMBIGUITY, marching_squares_table
 
 #: Ambiguity rules for squares: the two fixed ones and the asymptotic decider.
@@ -31,6 +31,7 @@ def marching_squares(
     flip: bool = False,
     ambiguity: str = DEFAULT_AMBIGUITY,
     nan_as: float | None = None,
+    vertex_offset: float = 0.0,
     axis: str = "z",
     on_status: Callable[[str], None] | None = None,
 ) -> Mesh:
@@ -49,6 +50,10 @@ def marching_squares(
         "separate-negative", or "asymptotic" (the bilinear saddle decides).
     nan_as : float or None
         Treat NaN/Inf samples as this value; None makes them an error.
+    vertex_offset : float
+        Keep every vertex at least this fraction of its edge's length away from
+        the edge's ends (0 <= f < 0.5). With f > 0, a level equal to grid values
+        gives no zero-length edges (see :func:`check_vertex_offset`).
     axis : str
         For 3D volumes: "x", "y" or "z", the axis the slices are across.
     on_status : callable or None
@@ -72,6 +77,7 @@ def marching_squares(
     ndim = volume.ndim
     arr, stats = kernel_array(volume, ndim, "squares", nan_as=nan_as, on_status=on_status)
     level = check_level(level, stats, volume.source)
+    offset = check_vertex_offset(vertex_offset)
     counts, table_pos = marching_squares_table("separate-positive")
     table = np.stack([table_pos, marching_squares_table("separate-negative")[1]])
     notice = f"compiling the Marching Squares kernel for {arr.dtype} data (first run only)"
@@ -85,7 +91,7 @@ def marching_squares(
             segs = np.empty((n_seg, 2), dtype=np.int64)
             xmap = np.empty(image.shape, dtype=np.int64)
             ymap = np.empty(image.shape, dtype=np.int64)
-            fill_squares(image, level, rule, counts, table, verts, ids, segs, xmap, ymap)
+            fill_squares(image, level, offset, rule, counts, table, verts, ids, segs, xmap, ymap)
             return verts, ids, segs
 
         if ndim == 2:
@@ -103,7 +109,7 @@ def _slices(volume, arr, level, a, contour, flip) -> Mesh:
     dims = volume.shape
     data = arr.T  # (X, Y, Z) view of the validated samples
     all_verts, all_ids, all_segs = [], [], []
-    offset = 0
+    base = 0
     for s in range(dims[a]):
         index = [slice(None)] * 3
         index[a] = s
@@ -125,8 +131,8 @@ def _slices(volume, arr, level, a, contour, flip) -> Mesh:
         axis3 = np.where(axis2 == 0, b, c)
         all_ids.append(3 * (grid[:, 0] + dims[0] * (grid[:, 1] + dims[1] * grid[:, 2])) + axis3)
         all_verts.append(verts)
-        all_segs.append(segs + offset)
-        offset += len(verts)
+        all_segs.append(segs + base)
+        base += len(verts)
     if not all_segs:
         raise IsoconvertError(f"{volume.source}: no slice crosses level {level:g}")
     verts = np.concatenate(all_verts)

@@ -11,7 +11,7 @@ from ..mesh import Mesh
 from ..volume import Volume
 from .jit import compile_notice
 from .placement import finish_mesh
-from .prepare import check_level, kernel_array
+from .prepare import check_level, check_vertex_offset, kernel_array
 from .tables import (
     CUBE_TETRAHEDRA,
     DEFAULT_AMBIGUITY,
@@ -32,6 +32,7 @@ def marching_tetrahedra(
     flip: bool = False,
     ambiguity: str = DEFAULT_AMBIGUITY,
     nan_as: float | None = None,
+    vertex_offset: float = 0.0,
     on_status: Callable[[str], None] | None = None,
 ) -> Mesh:
     """Extract the isosurface of a 3D volume with Marching Tetrahedra.
@@ -46,6 +47,7 @@ def marching_tetrahedra(
         raise IsoconvertError("tetra has no ambiguous configurations; drop --ambiguity")
     arr, stats = kernel_array(volume, 3, "tetra", nan_as=nan_as, on_status=on_status)
     level = check_level(level, stats, volume.source)
+    offset = check_vertex_offset(vertex_offset)
     counts, table = marching_tetrahedra_table()
     notice = f"compiling the Marching Tetrahedra kernel for {arr.dtype} data (first run only)"
     with compile_notice(on_status, notice):
@@ -58,6 +60,7 @@ def marching_tetrahedra(
         fill_tetra(
             arr,
             level,
+            offset,
             TETRA_DIRECTIONS,
             _IN_LAYER,
             _CROSSING,

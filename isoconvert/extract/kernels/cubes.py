@@ -75,7 +75,7 @@ def count_cubes(f, level, n_triangles):
 
 
 @njit(cache=True, nogil=True)
-def _layer_xy(f, level, k, xmap, ymap, verts, edge_ids, n):
+def _layer_xy(f, level, offset, k, xmap, ymap, verts, edge_ids, n):
     """Number the bipolar x- and y-edges of layer k from n on; return the next number."""
     nz, ny, nx = f.shape
     for j in range(ny):
@@ -85,7 +85,7 @@ def _layer_xy(f, level, k, xmap, ymap, verts, edge_ids, n):
             if i + 1 < nx:
                 s1 = np.float64(f[k, j, i + 1])
                 if p0 != (s1 >= level):
-                    t = (level - s0) / (s1 - s0)
+                    t = min(max((level - s0) / (s1 - s0), offset), 1.0 - offset)
                     verts[n, 0] = i + t
                     verts[n, 1] = j
                     verts[n, 2] = k
@@ -95,7 +95,7 @@ def _layer_xy(f, level, k, xmap, ymap, verts, edge_ids, n):
             if j + 1 < ny:
                 s1 = np.float64(f[k, j + 1, i])
                 if p0 != (s1 >= level):
-                    t = (level - s0) / (s1 - s0)
+                    t = min(max((level - s0) / (s1 - s0), offset), 1.0 - offset)
                     verts[n, 0] = i
                     verts[n, 1] = j + t
                     verts[n, 2] = k
@@ -106,7 +106,9 @@ def _layer_xy(f, level, k, xmap, ymap, verts, edge_ids, n):
 
 
 @njit(cache=True, nogil=True)
-def fill_cubes(f, level, n_triangles, triangles, edge_base, edge_axis, verts, edge_ids, tris):
+def fill_cubes(
+    f, level, offset, n_triangles, triangles, edge_base, edge_axis, verts, edge_ids, tris
+):
     """Write vertices (index coordinates), their grid-edge ids and triangles.
 
     Parameters
@@ -115,6 +117,9 @@ def fill_cubes(f, level, n_triangles, triangles, edge_base, edge_axis, verts, ed
         Samples, as for :func:`count_cubes`.
     level : float
         The isovalue.
+    offset : float
+        Vertices keep at least this fraction of their edge's length from its
+        ends (0: plain linear interpolation).
     n_triangles : (256,) int64
         Triangles per configuration.
     triangles : (256, T, 3) int64
@@ -136,7 +141,7 @@ def fill_cubes(f, level, n_triangles, triangles, edge_base, edge_axis, verts, ed
     xmap_hi = np.empty((ny, nx), dtype=np.int64)
     ymap_hi = np.empty((ny, nx), dtype=np.int64)
     zmap = np.empty((ny, nx), dtype=np.int64)
-    n = _layer_xy(f, level, 0, xmap_lo, ymap_lo, verts, edge_ids, 0)
+    n = _layer_xy(f, level, offset, 0, xmap_lo, ymap_lo, verts, edge_ids, 0)
     m = 0
     for k in range(nz - 1):
         for j in range(ny):
@@ -144,14 +149,14 @@ def fill_cubes(f, level, n_triangles, triangles, edge_base, edge_axis, verts, ed
                 s0 = np.float64(f[k, j, i])
                 s1 = np.float64(f[k + 1, j, i])
                 if (s0 >= level) != (s1 >= level):
-                    t = (level - s0) / (s1 - s0)
+                    t = min(max((level - s0) / (s1 - s0), offset), 1.0 - offset)
                     verts[n, 0] = i
                     verts[n, 1] = j
                     verts[n, 2] = k + t
                     edge_ids[n] = 3 * (i + nx * (j + ny * k)) + 2
                     zmap[j, i] = n
                     n += 1
-        n = _layer_xy(f, level, k + 1, xmap_hi, ymap_hi, verts, edge_ids, n)
+        n = _layer_xy(f, level, offset, k + 1, xmap_hi, ymap_hi, verts, edge_ids, n)
         for j in range(ny - 1):
             for i in range(nx - 1):
                 case = 0

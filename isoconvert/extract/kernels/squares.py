@@ -38,7 +38,9 @@ def count_squares(f, level, n_segments):
 
 
 @njit(cache=True, nogil=True)
-def fill_squares(f, level, ambiguity, n_segments, segments, verts, edge_ids, segs, xmap, ymap):
+def fill_squares(
+    f, level, offset, ambiguity, n_segments, segments, verts, edge_ids, segs, xmap, ymap
+):
     """Write vertices (u, v index coordinates), their edge ids and segments.
 
     Parameters
@@ -46,6 +48,8 @@ def fill_squares(f, level, ambiguity, n_segments, segments, verts, edge_ids, seg
     f : (V, U) array
         The image; a grid vertex is positive when its value is >= ``level``.
     level : float
+    offset : float
+        Minimum distance of vertices from edge ends, as a fraction of the edge.
     ambiguity : int
         0, 1 or 2, see the module docstring.
     n_segments : (16,) int64
@@ -70,7 +74,7 @@ def fill_squares(f, level, ambiguity, n_segments, segments, verts, edge_ids, seg
             if i + 1 < nx:
                 s1 = np.float64(f[j, i + 1])
                 if p0 != (s1 >= level):
-                    verts[n, 0] = i + (level - s0) / (s1 - s0)
+                    verts[n, 0] = i + min(max((level - s0) / (s1 - s0), offset), 1.0 - offset)
                     verts[n, 1] = j
                     edge_ids[n] = 2 * (i + nx * j)
                     xmap[j, i] = n
@@ -79,7 +83,7 @@ def fill_squares(f, level, ambiguity, n_segments, segments, verts, edge_ids, seg
                 s1 = np.float64(f[j + 1, i])
                 if p0 != (s1 >= level):
                     verts[n, 0] = i
-                    verts[n, 1] = j + (level - s0) / (s1 - s0)
+                    verts[n, 1] = j + min(max((level - s0) / (s1 - s0), offset), 1.0 - offset)
                     edge_ids[n] = 2 * (i + nx * j) + 1
                     ymap[j, i] = n
                     n += 1

@@ -48,7 +48,7 @@ def count_tetra(f, level, dirs, tets, n_triangles):
 
 
 @njit(cache=True, nogil=True)
-def _number(f, level, k, d, dirs, maps, verts, edge_ids, n):
+def _number(f, level, offset, k, d, dirs, maps, verts, edge_ids, n):
     """Number the bipolar edges of direction d starting in layer k, from n on."""
     nz, ny, nx = f.shape
     dx, dy, dz = dirs[d, 0], dirs[d, 1], dirs[d, 2]
@@ -58,7 +58,7 @@ def _number(f, level, k, d, dirs, maps, verts, edge_ids, n):
                 continue
             s0 = np.float64(f[k, j, i])
             s1 = np.float64(f[k + dz, j + dy, i + dx])
-            t = (level - s0) / (s1 - s0)
+            t = min(max((level - s0) / (s1 - s0), offset), 1.0 - offset)
             verts[n, 0] = i + t * dx
             verts[n, 1] = j + t * dy
             verts[n, 2] = k + t * dz
@@ -72,6 +72,7 @@ def _number(f, level, k, d, dirs, maps, verts, edge_ids, n):
 def fill_tetra(
     f,
     level,
+    offset,
     dirs,
     in_layer,
     crossing,
@@ -90,6 +91,8 @@ def fill_tetra(
     ----------
     f : (Z, Y, X) array
     level : float
+    offset : float
+        Minimum distance of vertices from edge ends, as a fraction of the edge.
     dirs : (7, 3) int64
         Edge directions.
     in_layer, crossing : int64 arrays
@@ -111,13 +114,13 @@ def fill_tetra(
     maps_hi = np.empty((7, ny, nx), dtype=np.int64)
     n = 0
     for d in in_layer:
-        n = _number(f, level, 0, d, dirs, maps_lo, verts, edge_ids, n)
+        n = _number(f, level, offset, 0, d, dirs, maps_lo, verts, edge_ids, n)
     m = 0
     for k in range(nz - 1):
         for d in crossing:
-            n = _number(f, level, k, d, dirs, maps_lo, verts, edge_ids, n)
+            n = _number(f, level, offset, k, d, dirs, maps_lo, verts, edge_ids, n)
         for d in in_layer:
-            n = _number(f, level, k + 1, d, dirs, maps_hi, verts, edge_ids, n)
+            n = _number(f, level, offset, k + 1, d, dirs, maps_hi, verts, edge_ids, n)
         for j in range(ny - 1):
             for i in range(nx - 1):
                 signs = 0
