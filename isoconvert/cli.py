@@ -1,7 +1,8 @@
 """Command line: a thin shell over the Python API (the only module using typer/rich).
 
 Exit codes: 0 success, 1 a problem with the input or output (one line on
-stderr), 2 a usage error, 130 interrupted.
+stderr), 2 a usage error, 3 an internal error (a bug), 4 a check named by
+``--require`` failed, 130 interrupted.
 """
 
 from __future__ import annotations
@@ -17,8 +18,9 @@ import typer
 
 from . import __version__
 from .errors import IsoconvertError, VolumeError
-from .extract import EXTRACTORS, SQUARE_AMBIGUITY_RULES
+from .extract import EXTRACTORS, NO_DEGENERATE_OFFSET, SQUARE_AMBIGUITY_RULES
 from .readers import READERS
+from .report import CHECK_NAMES
 from .writers import WRITERS
 
 app = typer.Typer(
@@ -38,6 +40,20 @@ _MULTI_VALUE = ("--shape", "--spacing", "--origin")
 Ambiguity = Enum("Ambiguity", {r.replace("-", "_"): r for r in SQUARE_AMBIGUITY_RULES}, type=str)
 Axis = Enum("Axis", {"x": "x", "y": "y", "z": "z"}, type=str)
 Endian = Enum("Endian", {"little": "little", "big": "big"}, type=str)
+
+#: Exit code when a check named by --require fails.
+EXIT_CHECK_FAILED = 4
+
+RequireOpt = Annotated[
+    str | None,
+    typer.Option(
+        help=f"Comma-separated checks that must pass, else exit code 4: {', '.join(CHECK_NAMES)}.",
+        rich_help_panel="Checks",
+    ),
+]
+ExamplesOpt = Annotated[
+    int, typer.Option(help="Examples to list per kind of problem.", rich_help_panel="Checks")
+]
 
 # Read options shared by convert and info
 InputFormatOpt = Annotated[
@@ -160,6 +176,23 @@ def convert(
     nan_as: Annotated[
         float | None, typer.Option(help="Treat NaN/Inf samples as this value (else an error).")
     ] = None,
+    no_degenerate: Annotated[
+        bool,
+        typer.Option(
+            "--no-degenerate",
+            help=f"Keep vertices {NO_DEGENERATE_OFFSET:g} of an edge away from grid vertices: "
+            "no zero-length edges when the level equals sample values.",
+        ),
+    ] = False,
+    report: Annotated[
+        str | None,
+        typer.Option(
+            help="Check the mesh and print a report; --report FILE.json writes it as JSON.",
+            rich_help_panel="Checks",
+        ),
+    ] = None,
+    require: RequireOpt = None,
+    examples: ExamplesOpt = 5,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only errors.")] = False,
     input_format: InputFormatOpt = None,
     shape: ShapeOpt = None,
@@ -171,6 +204,9 @@ def convert(
     origin: OriginOpt = None,
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
+    from .report import parse_requirements
+
+    required = parse_requirements(require)
     from .convert import convert as run_convert
 
     start = time.perf_counter()
@@ -185,6 +221,7 @@ def convert(
         flip=flip,
         ambiguity=ambiguity.value if ambiguity else None,
         axis=axis.value if axis else None,
+        vertex_offset=NO_DEGENERATE_OFFSET if no_degenerate else 0.0,
         nan_as=nan_as,
         on_status=_status(quiet),
         **_read_kwargs(input_format, shape, dtype, endian, header_bytes, channel, spacing, origin),
@@ -199,6 +236,54 @@ def convert(
             f"wrote {result.output}: {mesh.n_vertices:,} vertices, {mesh.n_cells:,} {kind} "
             f"(level {mesh.info['level']:g}, {time.perf_counter() - start:.2f} s)"
         )
+    if report is not None or required:
+        from .report import check_mesh
+
+        checked = check_mesh(result.mesh, examples=examples, source=str(result.output))
+        _emit_report(checked, report, required, as_json=False, force=force, quiet=quiet)
+
+
+@app.command()
+def check(
+    mesh_file: Annotated[Path, typer.Argument(help="OBJ, PLY or STL file to check.")],
+    require: RequireOpt = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    report: Annotated[
+        str | None,
+        typer.Option(help="Also write the report as JSON to FILE.json.", rich_help_panel="Checks"),
+    ] = None,
+    examples: ExamplesOpt = 5,
+    force: Annotated[
+        bool, typer.Option("--force", "-f", help="Overwrite the report file.")
+    ] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only errors.")] = False,
+) -> None:
+    """Report on a mesh file: degenerate elements, holes, manifoldness, orientation, topology."""
+    from .meshfile import read_mesh
+    from .report import check_mesh, parse_requirements
+
+    required = parse_requirements(require)
+    checked = check_mesh(read_mesh(mesh_file), examples=examples, source=str(mesh_file))
+    if report is not None and report != "-":
+        _emit_report(checked, report, [], as_json=False, force=force, quiet=True)
+    _emit_report(checked, "-", required, as_json=as_json, force=force, quiet=quiet)
+
+
+def _emit_report(checked, target, required, *, as_json, force, quiet) -> None:
+    """Print the report (target "-") or write it as JSON; exit 4 when a required check fails."""
+    from .report import format_report
+
+    if target is not None and target != "-":
+        from .atomic import atomic_output
+
+        with atomic_output(target, force) as fh:
+            fh.write((json.dumps(checked.to_dict(), indent=2) + "\n").encode("utf-8"))
+    elif target == "-" and not quiet:
+        print(json.dumps(checked.to_dict(), indent=2) if as_json else format_report(checked))
+    failed = checked.failures(required)
+    if failed:
+        print(f"isoconvert: required check failed: {', '.join(failed)}", file=sys.stderr)
+        raise typer.Exit(EXIT_CHECK_FAILED)
 
 
 @app.command()
@@ -314,13 +399,22 @@ def _print_methods() -> None:
 
 
 def gather_multi_values(argv: list[str]) -> list[str]:
-    """Join ``--shape 256 256 128`` into ``--shape 256,256,128`` (also spacing, origin)."""
+    """Join ``--shape 256 256 128`` into ``--shape 256,256,128`` (also spacing,
+    origin), and give a bare ``--report`` the value "-" (print) unless a
+    ``.json`` file name follows it."""
     out: list[str] = []
     i = 0
     while i < len(argv):
         token = argv[i]
         out.append(token)
         i += 1
+        if token == "--report":
+            if i < len(argv) and argv[i].lower().endswith(".json"):
+                out.append(argv[i])
+                i += 1
+            else:
+                out.append("-")
+            continue
         if token in _MULTI_VALUE:
             values = []
             while i < len(argv) and len(values) < 3 and _is_number(argv[i]):

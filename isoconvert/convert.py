@@ -36,6 +36,7 @@ def convert(
     flip: bool = False,
     ambiguity: str | None = None,
     axis: str | None = None,
+    vertex_offset: float = 0.0,
     nan_as: float | None = None,
     input_format: str | None = None,
     spacing: tuple[float, ...] | None = None,
@@ -56,6 +57,8 @@ def convert(
         raise OutputError(f"{output}: is the input file; choose another output name")
     volume = read_volume(input, format=input_format, spacing=spacing, origin=origin, **read_options)
     options = {} if axis is None else {"axis": axis}
+    if vertex_offset:
+        options["vertex_offset"] = vertex_offset
     mesh = extract(
         volume,
         level,

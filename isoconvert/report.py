@@ -14,6 +14,7 @@ Everything is vectorized numpy; no numba, so ``isoconvert check`` starts fast.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -21,6 +22,8 @@ from .graph import connected_components, group_sizes, row_groups
 from .mesh import Mesh
 
 SCHEMA_VERSION = 1
+#: The JSON schema of :meth:`Report.to_dict`, shipped with the package.
+SCHEMA_PATH = Path(__file__).with_name("report.schema.json")
 
 #: Checks on triangle meshes, for ``--require``.
 TRIANGLE_CHECKS = {
