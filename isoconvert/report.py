@@ -444,6 +444,8 @@ def _fans_per_vertex(a, o1, o2, same_way, n_u, edge_manifold) -> np.ndarray:
         return o - o % 3 + (o % 3 + 1) % 3
 
     n = len(a)
+    if n == 0:
+        return np.zeros(n_u, dtype=np.int64)
     if edge_manifold and not same_way.any():
         # Oriented: around each vertex the corners form chains (boundary) or cycles,
         # "next" stepping across the edge that leaves the vertex. Label each chain
