@@ -130,11 +130,12 @@ def test_neighbouring_patches_agree_on_the_shared_face(rule):
 def test_orientation_points_from_positive_to_negative():
     """Each polygon's vector area (vertices at edge midpoints; independent of how
     it is triangulated) points from its positive to its negative corners, and
-    the triangles of the table are a triangulation of those polygons."""
+    the table's triangles triangulate those polygons, keeping their direction."""
     for rule in AMBIGUITY_RULES:
         for config in range(1, 255):
             pos = np.array([(config >> v) & 1 for v in range(8)], bool)
             fan = []
+            n_tris = 0
             for poly in cube_polygons(config, rule):
                 p = np.array([CUBE_VERTICES[CUBE_EDGES[e]].mean(axis=0) for e in poly])
                 area = 0.5 * np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
@@ -144,8 +145,11 @@ def test_orientation_points_from_positive_to_negative():
                     step = CUBE_VERTICES[b] - CUBE_VERTICES[a]
                     to_negative += step if pos[a] else -step
                 assert np.dot(area, to_negative) > 0, (rule, config, poly)
-                fan += [(poly[0], poly[i], poly[i + 1]) for i in range(1, len(poly) - 1)]
-            assert triangles(config, rule) == fan
+                fan += [(poly[i], poly[(i + 1) % len(poly)]) for i in range(len(poly))]
+                n_tris += len(poly) - 2
+            tris = triangles(config, rule)
+            assert len(tris) == n_tris
+            assert _patch_boundary(tris) == set(fan), (rule, config)
 
 
 def test_rules_differ_only_on_configurations_with_an_ambiguous_face():
@@ -165,11 +169,35 @@ def test_rules_differ_only_on_configurations_with_an_ambiguous_face():
         same = c1[config] == c2[config] and np.array_equal(t1[config], t2[config])
         if not has_ambiguous_face(config):
             assert same, config
+
     # Swapping signs swaps the rules and reverses orientation: configuration k
-    # under one rule is 255 - k under the other, each triangle reversed.
+    # under one rule has the polygons of 255 - k under the other, reversed.
+    def cycles(polys):
+        return {tuple(np.roll(p, -int(np.argmin(p)))) for p in polys}
+
     for config in range(256):
-        a = {t for t in triangles(config, "separate-positive")}
-        b = {t[::-1] for t in triangles(255 - config, "separate-negative")}
-        cyc = {tuple(np.roll(t, -int(np.argmin(t)))) for t in a}
-        cyc_b = {tuple(np.roll(t, -int(np.argmin(t)))) for t in b}
-        assert cyc == cyc_b, config
+        a = cycles(cube_polygons(config, "separate-positive"))
+        b = cycles(p[::-1] for p in cube_polygons(255 - config, "separate-negative"))
+        assert a == b, config
+
+
+@pytest.mark.parametrize("rule", AMBIGUITY_RULES)
+def test_no_diagonal_lies_in_a_cube_face(rule):
+    """A triangle edge that is not a side of its polygon must not join two cube
+    edges of one face: the neighbouring cube's patch could use the same chord,
+    making an edge of four triangles (found by a random grid with a fan rule)."""
+
+    def faces(e):
+        v = CUBE_VERTICES[CUBE_EDGES[e]]
+        return {(a, s) for a in range(3) for s in (0, 1) if (v[:, a] == s).all()}
+
+    for config in range(256):
+        sides = {
+            frozenset((p[i], p[(i + 1) % len(p)]))
+            for p in cube_polygons(config, rule)
+            for i in range(len(p))
+        }
+        for t in triangles(config, rule):
+            for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+                if frozenset((a, b)) not in sides:
+                    assert not faces(a) & faces(b), (config, t)

@@ -9,8 +9,12 @@ the book's compatibility argument (Wenger, *Isosurfaces*, sections 2.2-2.3):
    the two segments cut off either the two positive or the two negative
    corners, one fixed choice for all faces.
 2. Every bipolar edge of the cell lies on two faces, so the face segments chain
-   into closed cycles; each cycle is one polygon of the isosurface patch,
-   triangulated as a fan.
+   into closed cycles; each cycle is one polygon of the isosurface patch.
+3. Each polygon is triangulated without a diagonal whose ends lie on one face
+   of the cell. Such a chord lies in the face, where the neighbouring cell's
+   patch may have the same chord: the edge would then belong to four triangles
+   (a random grid found this; a fan from a fixed vertex does it for some
+   hexagons).
 
 Because the segments on a face depend only on the signs of that face's
 corners, two cells that share a face cut it along the same segments: patches
@@ -177,6 +181,47 @@ def fan(polygons: list[list[int]]) -> list[tuple[int, int, int]]:
     return [(p[0], p[i], p[i + 1]) for p in polygons for i in range(1, len(p) - 1)]
 
 
+def _triangulations(poly: list[int]):
+    """Every triangulation of a convex polygon, triangles in the polygon's order;
+    fans first (from each vertex in turn), then the others."""
+    n = len(poly)
+    for apex in range(n):
+        p = poly[apex:] + poly[:apex]
+        yield [(p[0], p[i], p[i + 1]) for i in range(1, n - 1)]
+
+    def split(p):
+        if len(p) == 3:
+            yield [tuple(p)]
+            return
+        for k in range(1, len(p) - 1):
+            left = [[]] if k == 1 else list(split(p[: k + 1]))
+            right = [[]] if k == len(p) - 2 else list(split(p[k:]))
+            for a in left:
+                for b in right:
+                    yield a + b + [(p[0], p[k], p[-1])]
+
+    yield from split(poly)
+
+
+def triangulate(poly: list[int], share_a_face) -> list[tuple[int, int, int]]:
+    """Triangulate a polygon so that no diagonal joins two vertices on one cell face.
+
+    Parameters
+    ----------
+    poly : list of int
+        Cell edges of the polygon's vertices, in cyclic order.
+    share_a_face : callable
+        ``share_a_face(e1, e2)``: whether cell edges e1 and e2 lie on one face.
+    """
+    n = len(poly)
+    sides = {frozenset((poly[i], poly[(i + 1) % n])) for i in range(n)}
+    for tris in _triangulations(poly):
+        chords = {frozenset(p) for t in tris for p in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+        if not any(share_a_face(*c) for c in chords - sides):
+            return tris
+    raise ValueError(f"no triangulation of {poly} avoids chords on a face")  # never, by test
+
+
 def _padded(per_config: list[list[tuple[int, ...]]], arity: int) -> tuple[np.ndarray, np.ndarray]:
     """(n_configs,) counts and (n_configs, width, arity) int64 table padded with -1."""
     width = max(1, max(len(t) for t in per_config))
@@ -236,7 +281,25 @@ def marching_cubes_table(rule: str = DEFAULT_AMBIGUITY) -> tuple[np.ndarray, np.
         Cube-edge indices of each triangle, padded with -1; T is the largest
         count over all configurations.
     """
-    return _padded([fan(cube_polygons(config, rule)) for config in range(256)], 3)
+    return _padded(
+        [
+            [t for poly in cube_polygons(config, rule) for t in triangulate(poly, _share_a_face)]
+            for config in range(256)
+        ],
+        3,
+    )
+
+
+def _share_a_face(e1: int, e2: int) -> bool:
+    """Whether cube edges e1 and e2 lie on one face of the cube."""
+    return bool(_EDGE_FACES[e1] & _EDGE_FACES[e2])
+
+
+#: The faces (axis, side) each cube edge lies on.
+_EDGE_FACES = [
+    {(a, s) for a in range(3) for s in (0, 1) if (CUBE_VERTICES[CUBE_EDGES[e]][:, a] == s).all()}
+    for e in range(12)
+]
 
 
 # --- Marching Squares ---------------------------------------------------------------
