@@ -84,5 +84,18 @@ class Registry(Generic[T]):
         """Built-ins and already loaded plugins; :meth:`get` loads the others."""
         return iter(list(self._entries.items()))
 
+    def by_suffix(self, suffix: str) -> tuple[str, T] | None:
+        """The first entry whose ``suffixes`` include ``suffix`` (readers, writers)."""
+        for name, entry in self._entries.items():
+            if suffix.lower() in getattr(entry, "suffixes", ()):
+                return name, entry
+        return None
+
+    def suffix_listing(self) -> str:
+        """``"ply (.ply), obj (.obj)"``: the entries and their suffixes, for messages."""
+        return ", ".join(
+            f"{n} ({' '.join(getattr(e, 'suffixes', ()))})" for n, e in self._entries.items()
+        )
+
     def __contains__(self, name: object) -> bool:
         return isinstance(name, str) and name.lower() in self.names()

@@ -86,13 +86,12 @@ def detect_format(spec: str) -> str:
         matches = globlib.glob(spec)
         if matches:
             suffix = Path(matches[0]).suffix.lower()
-    for name, reader in READERS.items():
-        if suffix in reader.suffixes:
-            return name
-    known = ", ".join(f"{n} ({' '.join(r.suffixes)})" for n, r in READERS.items())
+    found = READERS.by_suffix(suffix)
+    if found:
+        return found[0]
     raise FormatError(
-        f"{spec}: cannot tell the format from the name; known input formats: {known}; "
-        "or name one with --input-format"
+        f"{spec}: cannot tell the format from the name; known input formats: "
+        f"{READERS.suffix_listing()}; or name one with --input-format"
     )
 
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import FormatError, VolumeError
 from ..volume import Volume
-from .options import ReadOptions
+from .options import ReadOptions, select_channel
 
 # "data file: <format> <min> <max> <step> [<subdim>]" (NRRD spec, detached headers)
 _MULTI_FILE = re.compile(r"^(\S*%\S*)\s+(-?\d+)\s+(-?\d+)\s+(-?\d+)(?:\s+(\d+))?$")
@@ -111,19 +111,9 @@ def _domain_axes(path: Path, header: dict, data: np.ndarray, channel: int | None
         raise VolumeError(
             f"{path}: NRRD axes of kinds {kinds} cannot be read as a 2D or 3D scalar volume"
         )
-    if other:
-        n = data.shape[other[0]]
-        if channel is None:
-            raise VolumeError(
-                f"{path}: the NRRD has {n} values per sample ({kinds[other[0]]}); "
-                f"choose one with --channel 0..{n - 1}"
-            )
-        if not 0 <= channel < n:
-            raise VolumeError(f"{path}: --channel {channel} is out of range 0..{n - 1}")
-        data = np.take(data, channel, axis=other[0])
-    elif channel is not None:
-        raise VolumeError(f"{path}: --channel given, but the NRRD has one value per sample")
-    return data, spatial
+    axis = other[0] if other else None
+    what = f"values per sample ({kinds[axis]})" if other else ""
+    return select_channel(data, axis, channel, path, what), spatial
 
 
 def _placement(header: dict, domain: list[int]):

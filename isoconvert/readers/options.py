@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import VolumeError
 
 
 @dataclass(frozen=True)
@@ -33,3 +38,22 @@ class ReadOptions:
         """Names of the options that differ from their defaults."""
         default = ReadOptions()
         return {f.name for f in fields(self) if getattr(self, f.name) != getattr(default, f.name)}
+
+
+def select_channel(
+    array: np.ndarray, axis: int | None, channel: int | None, path: Path, what: str
+) -> np.ndarray:
+    """Take ``channel`` along ``axis`` (the channel axis, or None when there is none).
+
+    ``what`` names the channels in messages ("values per sample (vector)").
+    """
+    if axis is None:
+        if channel is not None:
+            raise VolumeError(f"{path}: --channel given, but the file has one value per sample")
+        return array
+    n = array.shape[axis]
+    if channel is None:
+        raise VolumeError(f"{path}: {n} {what}; choose one with --channel 0..{n - 1}")
+    if not 0 <= channel < n:
+        raise VolumeError(f"{path}: --channel {channel} is out of range 0..{n - 1}")
+    return np.take(array, channel, axis=axis)

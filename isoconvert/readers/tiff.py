@@ -10,7 +10,7 @@ import numpy as np
 
 from ..errors import FormatError, InputNotFoundError, VolumeError
 from ..volume import Volume
-from .options import ReadOptions
+from .options import ReadOptions, select_channel
 
 TIFF_SUFFIXES = (".tif", ".tiff")
 
@@ -71,21 +71,10 @@ def _pick_channel(array: np.ndarray, axes: str, channel: int | None, path: Path)
     keep = [a for a, n in zip(axes, array.shape, strict=True) if n > 1 or a in "XY"]
     array = array.reshape([n for a, n in zip(axes, array.shape, strict=True) if a in keep])
     axes = "".join(keep)
-    channel_axes = [i for i, a in enumerate(axes) if a in "CS"]
-    if channel_axes:
-        ax = channel_axes[0]
-        n = array.shape[ax]
-        if channel is None:
-            raise VolumeError(
-                f"{path}: the image has {n} channels (RGB or multi-channel); "
-                f"choose one with --channel 0..{n - 1}"
-            )
-        if not 0 <= channel < n:
-            raise VolumeError(f"{path}: --channel {channel} is out of range 0..{n - 1}")
-        array = np.take(array, channel, axis=ax)
+    ax = next((i for i, a in enumerate(axes) if a in "CS"), None)
+    array = select_channel(array, ax, channel, path, "channels (RGB or multi-channel)")
+    if ax is not None:
         axes = axes[:ax] + axes[ax + 1 :]
-    elif channel is not None:
-        raise VolumeError(f"{path}: --channel given, but the image has one channel")
     if array.ndim not in (2, 3):
         raise VolumeError(
             f"{path}: a TIFF with axes {axes} is not a 2D or 3D scalar image "

@@ -64,13 +64,12 @@ def output_format(path: str | Path, format: str | None = None) -> Writer:
     if format:
         return WRITERS.get(format)
     suffix = Path(path).suffix.lower()
-    for _, writer in WRITERS.items():
-        if suffix in writer.suffixes:
-            return writer
-    known = ", ".join(f"{n} ({' '.join(w.suffixes)})" for n, w in WRITERS.items())
+    found = WRITERS.by_suffix(suffix)
+    if found:
+        return found[1]
     raise FormatError(
         f"{path}: unknown output extension {suffix or '(none)'!r}; "
-        f"known output formats: {known}; or name one with --format"
+        f"known output formats: {WRITERS.suffix_listing()}; or name one with --format"
     )
 
 
