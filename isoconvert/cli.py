@@ -8,8 +8,10 @@ stderr), 2 a usage error, 3 an internal error (a bug), 4 a check named by
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
+from contextlib import contextmanager
 from enum import Enum
 from pathlib import Path
 from typing import Annotated
@@ -90,6 +92,23 @@ OriginOpt = Annotated[
     str | None,
     typer.Option(help="Override the origin: x y [z].", rich_help_panel="Input"),
 ]
+
+
+def _interactive() -> bool:
+    """Progress displays only on a terminal, never in pipes, logs or CI."""
+    return sys.stderr.isatty()
+
+
+@contextmanager
+def _stage_display(quiet: bool):
+    """A spinner naming the stage (reading, extracting, writing) on a terminal."""
+    if quiet or not _interactive():
+        yield None
+        return
+    from rich.console import Console
+
+    with Console(stderr=True).status("starting") as status:
+        yield lambda stage: status.update(f"{stage}...")
 
 
 def _status(quiet: bool):
@@ -210,22 +229,26 @@ def convert(
     from .convert import convert as run_convert
 
     start = time.perf_counter()
-    result = run_convert(
-        input,
-        output,
-        level,
-        method=method,
-        format=format,
-        ascii=ascii,
-        force=force,
-        flip=flip,
-        ambiguity=ambiguity.value if ambiguity else None,
-        axis=axis.value if axis else None,
-        vertex_offset=NO_DEGENERATE_OFFSET if no_degenerate else 0.0,
-        nan_as=nan_as,
-        on_status=_status(quiet),
-        **_read_kwargs(input_format, shape, dtype, endian, header_bytes, channel, spacing, origin),
-    )
+    with _stage_display(quiet) as on_progress:
+        result = run_convert(
+            input,
+            output,
+            level,
+            method=method,
+            format=format,
+            ascii=ascii,
+            force=force,
+            flip=flip,
+            ambiguity=ambiguity.value if ambiguity else None,
+            axis=axis.value if axis else None,
+            vertex_offset=NO_DEGENERATE_OFFSET if no_degenerate else 0.0,
+            nan_as=nan_as,
+            on_status=_status(quiet),
+            on_progress=on_progress,
+            **_read_kwargs(
+                input_format, shape, dtype, endian, header_bytes, channel, spacing, origin
+            ),
+        )
     if not quiet:
         for note in result.volume.notes:
             print(f"note: {note}", file=sys.stderr)
@@ -284,6 +307,228 @@ def _emit_report(checked, target, required, *, as_json, force, quiet) -> None:
     if failed:
         print(f"isoconvert: required check failed: {', '.join(failed)}", file=sys.stderr)
         raise typer.Exit(EXIT_CHECK_FAILED)
+
+
+@app.command()
+def batch(
+    inputs: Annotated[list[str], typer.Argument(help="Files, folders or globs of volumes.")],
+    out_dir: Annotated[Path, typer.Option("-o", "--output", help="Folder for the meshes.")],
+    level: Annotated[
+        str | None, typer.Option("--level", "-l", help="Isovalue for all, or 'auto' (Otsu).")
+    ] = None,
+    levels: Annotated[
+        Path | None,
+        typer.Option(help="TOML or CSV mapping of path patterns to level and read options."),
+    ] = None,
+    recursive: Annotated[
+        bool, typer.Option("--recursive", "-r", help="Search sub-folders.")
+    ] = False,
+    format: Annotated[
+        str, typer.Option(help=f"Output format: {', '.join(WRITERS.names())}.")
+    ] = "ply",
+    method: Annotated[str | None, typer.Option(help="Extraction method (as convert).")] = None,
+    ascii: Annotated[bool, typer.Option("--ascii", help="Text PLY/STL.")] = False,
+    flip: Annotated[bool, typer.Option("--flip", help="Reverse orientation.")] = False,
+    no_degenerate: Annotated[
+        bool, typer.Option("--no-degenerate", help="As convert: no zero-length edges.")
+    ] = False,
+    jobs: Annotated[
+        int | None, typer.Option("--jobs", "-j", help="Worker processes (default: cores).")
+    ] = None,
+    max_memory: Annotated[
+        str | None,
+        typer.Option(
+            help="Memory the running conversions may use together, e.g. 8G "
+            "(default: 80% of what is available)."
+        ),
+    ] = None,
+    skip_existing: Annotated[
+        bool, typer.Option("--skip-existing", help="Keep outputs that exist; convert the rest.")
+    ] = False,
+    force: Annotated[
+        bool, typer.Option("--force", "-f", help="Overwrite existing outputs.")
+    ] = False,
+    summary: Annotated[
+        Path | None, typer.Option(help="Write a summary table as FILE.json or FILE.csv.")
+    ] = None,
+    require: RequireOpt = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only errors.")] = False,
+    shape: ShapeOpt = None,
+    dtype: DtypeOpt = None,
+    endian: EndianOpt = Endian.little,
+    header_bytes: HeaderBytesOpt = 0,
+    spacing: SpacingOpt = None,
+) -> None:
+    """Convert many volumes: files, folders (--recursive) and globs, in parallel."""
+    from . import batch as batching
+    from .readers.tiff import natural_key
+    from .report import parse_requirements
+
+    required = parse_requirements(require)
+    writer = WRITERS.get(format)
+    if level is None and levels is None:
+        raise VolumeError("batch needs --level (a number or auto) or --levels FILE")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise VolumeError(f"{out_dir}: exists and is not a folder; choose another -o")
+    budget = _bytes(max_memory) if max_memory else _default_budget()
+    if summary is not None:
+        batching.summary_bytes([], summary.suffix.lower())  # a bad suffix fails now, not at the end
+        if summary.exists() and not (force or skip_existing):
+            raise VolumeError(f"{summary}: already exists; pass --force to overwrite it")
+    rules = batching.read_mapping(levels) if levels else None
+    found, skipped = batching.discover(inputs, recursive=recursive, exclude=out_dir)
+    numeric_level = None if level is None else (level if level == "auto" else _level(level))
+    read = _read_kwargs(None, shape, dtype, endian, header_bytes, None, spacing, None)
+    read.pop("input_format")
+    read = {k: v for k, v in read.items() if v is not None and k != "origin"}
+    if read.get("endian") == "little":
+        read.pop("endian")
+    if not read.get("header_bytes"):
+        read.pop("header_bytes", None)
+    work, outcomes = batching.plan(
+        found,
+        out_dir,
+        writer.suffixes[0],
+        numeric_level,
+        rules,
+        skip_existing=skip_existing,
+        force=force,
+        options=read,
+    )
+    for item in skipped:
+        outcomes.append(batching.Outcome(item.path, "", "skipped", message=item.reason))
+    settings = {
+        "format": writer.name,
+        "ascii": ascii,
+        "flip": flip,
+        "method": method,
+        "vertex_offset": NO_DEGENERATE_OFFSET if no_degenerate else 0.0,
+        "require": required,
+    }
+    if work:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    workers = max(1, min(jobs or os.cpu_count() or 1, len(work) or 1))
+    with _batch_display(quiet, len(work)) as on_done:
+        try:
+            outcomes += batching.run_jobs(work, settings, workers, budget, on_done)
+        except KeyboardInterrupt:
+            print(
+                "isoconvert: interrupted; finished outputs are complete, none is partial",
+                file=sys.stderr,
+            )
+            raise typer.Exit(130) from None
+    outcomes.sort(key=lambda o: natural_key(Path(o.input)))
+    if summary is not None:
+        from .atomic import atomic_output
+
+        with atomic_output(summary, force=True) as fh:
+            fh.write(batching.summary_bytes(outcomes, summary.suffix.lower()))
+    if not quiet:
+        _print_batch_table(outcomes)
+    statuses = [o.status for o in outcomes]
+    if "failed" in statuses or "interrupted" in statuses:
+        raise typer.Exit(1)
+    if "check-failed" in statuses:
+        raise typer.Exit(EXIT_CHECK_FAILED)
+
+
+def _level(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise VolumeError(f"--level must be a number or 'auto', got {text!r}") from None
+
+
+def _bytes(text: str) -> int:
+    units = {"K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
+    t = text.strip().upper().removesuffix("B").removesuffix("I")
+    try:
+        if t and t[-1] in units:
+            return int(float(t[:-1]) * units[t[-1]])
+        return int(float(t))
+    except ValueError:
+        raise VolumeError(f"--max-memory takes a size such as 8G or 512M, got {text!r}") from None
+
+
+def _default_budget() -> int | None:
+    from .memory import available_memory
+
+    available = available_memory()
+    return int(0.8 * available) if available else None
+
+
+@contextmanager
+def _batch_display(quiet: bool, total: int):
+    """Files done of total with ETA on a terminal; failures as lines on stderr."""
+
+    def report_failure(outcome, console=None):
+        if outcome.status in ("failed", "check-failed") and not quiet:
+            line = f"isoconvert: {outcome.message}"
+            if console is not None:
+                console.print(line, markup=False, highlight=False)
+            else:
+                print(line, file=sys.stderr)
+
+    if quiet or not _interactive() or total == 0:
+        yield report_failure
+        return
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+    )
+
+    console = Console(stderr=True)
+    columns = [
+        TextColumn("converting"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        TextColumn("{task.description}"),
+    ]
+    with Progress(*columns, console=console, transient=True) as progress:
+        task = progress.add_task("", total=total)
+
+        def on_done(outcome):
+            report_failure(outcome, progress.console)
+            progress.update(task, advance=1, description=Path(outcome.input).name)
+
+        yield on_done
+
+
+def _print_batch_table(outcomes) -> None:
+    rows = [("file", "level", "vertices", "cells", "seconds", "checks", "status")]
+    for o in outcomes:
+        checks = (
+            ""
+            if o.checks is None
+            else ",".join(f"{k}{'' if v else '!'}" for k, v in o.checks.items())
+        )
+        rows.append(
+            (
+                o.input,
+                "" if o.level is None else f"{o.level:g}",
+                "" if o.vertices is None else f"{o.vertices:,}",
+                "" if o.cells is None else f"{o.cells:,}",
+                f"{o.seconds:.2f}" if o.status not in ("skipped",) else "",
+                checks,
+                o.status if not o.message or o.status == "ok" else f"{o.status}: {o.message}"[:80],
+            )
+        )
+    widths = [max(len(r[c]) for r in rows) for c in range(6)]
+    for r in rows:
+        print(
+            "  ".join(r[c].ljust(widths[c]) if c == 0 else r[c].rjust(widths[c]) for c in range(6))
+            + "  "
+            + r[6]
+        )
+    totals = {}
+    for o in outcomes:
+        totals[o.status] = totals.get(o.status, 0) + 1
+    print(", ".join(f"{n} {s}" for s, n in totals.items()))
 
 
 @app.command()

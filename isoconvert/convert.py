@@ -42,6 +42,7 @@ def convert(
     spacing: tuple[float, ...] | None = None,
     origin: tuple[float, ...] | None = None,
     on_status: Callable[[str], None] | None = None,
+    on_progress: Callable[[str], None] | None = None,
     **read_options,
 ) -> ConvertResult:
     """Read ``input``, extract the isosurface at ``level``, write it to ``output``.
@@ -49,16 +50,20 @@ def convert(
     Everything that can be checked before the work is checked first (output
     format and folder, existing file), so a mistake costs no extraction time.
     Parameters are those of :func:`read_volume`, :func:`extract` and
-    :func:`write_mesh`.
+    :func:`write_mesh`; ``on_progress`` is called with the stage starting
+    ("reading", "extracting", "writing").
     """
+    progress = on_progress or (lambda stage: None)
     writer = output_format(output, format)
     check_output(output, force)
     if Path(output).resolve() == Path(input).resolve():
         raise OutputError(f"{output}: is the input file; choose another output name")
+    progress("reading")
     volume = read_volume(input, format=input_format, spacing=spacing, origin=origin, **read_options)
     options = {} if axis is None else {"axis": axis}
     if vertex_offset:
         options["vertex_offset"] = vertex_offset
+    progress("extracting")
     mesh = extract(
         volume,
         level,
@@ -69,5 +74,6 @@ def convert(
         on_status=on_status,
         **options,
     )
+    progress("writing")
     path = write_mesh(mesh, output, format=writer.name, ascii=ascii, force=force)
     return ConvertResult(volume, mesh, path)

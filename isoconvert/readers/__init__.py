@@ -7,7 +7,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import FormatError, InputNotFoundError, VolumeError
+from ..errors import FormatError, InputNotFoundError, IsoconvertError, VolumeError
 from ..registry import Registry
 from ..volume import Volume
 from .image import IMAGE_SUFFIXES, read_image
@@ -139,12 +139,22 @@ def read_volume(
         raise VolumeError(f"{spec}: {flags} do(es) not apply to {name} input")
     try:
         volume = reader.read(p, opts)
+    except IsoconvertError:
+        raise
     except PermissionError:
         raise InputNotFoundError(
             f"{spec}: permission denied; check the file's permissions"
         ) from None
     except IsADirectoryError:
         raise FormatError(f"{spec}: is a folder, expected a {name} file") from None
+    except MemoryError:
+        raise VolumeError(f"{spec}: the volume does not fit in memory") from None
+    except Exception as exc:
+        # The parsers (pynrrd, tifffile, Pillow) raise many kinds of exceptions on
+        # corrupt input; each is a fact about the file, not a bug of ours.
+        raise FormatError(
+            f"{spec}: not a readable {name} file ({type(exc).__name__}: {exc})"
+        ) from None
     if spacing is not None or origin is not None:
         volume = volume.with_placement(spacing, origin)
         volume.notes.append("spacing/origin set on the command line")

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FormatError, VolumeError
+from ..memory import check_fits
 from ..volume import Volume
 from .options import ReadOptions, select_channel
 
@@ -28,6 +29,7 @@ def read_nrrd(path: Path, options: ReadOptions) -> Volume:
         header = nrrd.read_header(str(path))
     except (nrrd.NRRDError, UnicodeDecodeError, ValueError, IndexError) as exc:
         raise FormatError(f"{path}: not a readable NRRD header ({exc})") from None
+    _check_declared_size(path, header)
     data_file = str(header.get("data file", header.get("datafile", "")))
     try:
         if data_file.startswith("LIST"):
@@ -64,6 +66,21 @@ def read_nrrd(path: Path, options: ReadOptions) -> Volume:
         notes=notes,
         unit=unit,
     )
+
+
+def _check_declared_size(path: Path, header: dict) -> None:
+    """The header's sizes must be positive and fit in memory before pynrrd allocates."""
+    from nrrd.reader import _determine_datatype
+
+    try:
+        sizes = [int(s) for s in header["sizes"]]
+        # the byte order does not change the size (and 1-byte types may omit it)
+        itemsize = _determine_datatype({**header, "endian": "little"}).itemsize
+    except Exception as exc:  # pynrrd raises several kinds for a bad header
+        raise FormatError(f"{path}: the NRRD header has no usable sizes or type ({exc})") from None
+    if any(s <= 0 for s in sizes):
+        raise VolumeError(f"{path}: the NRRD header declares sizes {sizes}; all must be >= 1")
+    check_fits(int(np.prod(sizes, dtype=np.float64)) * itemsize, "the declared volume", str(path))
 
 
 def _read_multi_file(path: Path, header: dict, data_file: str) -> np.ndarray:

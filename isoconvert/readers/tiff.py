@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FormatError, InputNotFoundError, VolumeError
+from ..memory import check_fits
 from ..volume import Volume
 from .options import ReadOptions, select_channel
 
@@ -52,6 +53,8 @@ def read_tiff(path: Path, options: ReadOptions) -> Volume:
         if len(files) == 1:
             with tifffile.TiffFile(files[0]) as tif:
                 series = tif.series[0]
+                declared = int(np.prod(series.shape, dtype=np.float64)) * series.dtype.itemsize
+                check_fits(declared, "the declared image series", spec)
                 data = _pick_channel(series.asarray(), series.axes, options.channel, files[0])
                 spacing, unit, notes = _spacing(tif, data.ndim)
         else:
@@ -99,6 +102,7 @@ def _stack_slices(files: list[Path], channel: int | None) -> np.ndarray:
             )
         if first is None:
             first = (f, img.shape, img.dtype)
+            check_fits(len(files) * img.nbytes, f"{len(files)} slices like {f.name}", str(f))
             out = np.empty((len(files),) + img.shape, dtype=img.dtype)
         elif (img.shape, img.dtype) != first[1:]:
             raise VolumeError(

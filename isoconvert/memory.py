@@ -1,0 +1,33 @@
+"""How much memory there is, so that declared sizes can be refused before allocating."""
+
+from __future__ import annotations
+
+import os
+
+from .errors import VolumeError
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux MemAvailable), or None."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_fits(n_bytes: int, what: str, source: str) -> None:
+    """Refuse, before allocating, data that would not fit in available memory."""
+    available = available_memory()
+    if available is not None and n_bytes > available:
+        raise VolumeError(
+            f"{source}: {what} needs {n_bytes / 2**30:.1f} GiB, more than the "
+            f"{available / 2**30:.1f} GiB of memory available; check the header, or use a "
+            "machine with more memory"
+        )
