@@ -19,7 +19,7 @@ from typing import Annotated
 import typer
 
 from . import __version__
-from .errors import IsoconvertError, VolumeError
+from .errors import IsoconvertError, VolumeError, one_line
 from .extract import EXTRACTORS, NO_DEGENERATE_OFFSET, SQUARE_AMBIGUITY_RULES
 from .readers import READERS
 from .report import CHECK_NAMES
@@ -412,11 +412,7 @@ def batch(
         try:
             outcomes += batching.run_jobs(work, settings, workers, budget, on_done)
         except KeyboardInterrupt:
-            print(
-                "isoconvert: interrupted; finished outputs are complete, none is partial",
-                file=sys.stderr,
-            )
-            raise typer.Exit(130) from None
+            raise typer.Exit(130) from None  # main() says so
     outcomes.sort(key=lambda o: natural_key(Path(o.input)))
     if summary is not None:
         from .atomic import atomic_output
@@ -687,16 +683,19 @@ def main(argv: list[str] | None = None) -> int:
         app(args=args, prog_name="isoconvert", standalone_mode=True)
     except SystemExit as exc:
         code = exc.code
-        return code if isinstance(code, int) else (0 if code is None else 1)
+        code = code if isinstance(code, int) else (0 if code is None else 1)
+        if code == 130:  # click turns Ctrl-C into exit code 130
+            print("isoconvert: interrupted; no partial output was left", file=sys.stderr)
+        return code
     except IsoconvertError as exc:
         if debug:
             raise
-        print(f"isoconvert: error: {exc}", file=sys.stderr)
+        print(f"isoconvert: error: {one_line(exc, limit=2000)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         if debug:
             raise
-        print("isoconvert: interrupted; no output was written", file=sys.stderr)
+        print("isoconvert: interrupted; no partial output was left", file=sys.stderr)
         return 130
     except MemoryError:
         if debug:

@@ -28,3 +28,10 @@ class LevelError(IsoconvertError):
 
 class OutputError(IsoconvertError):
     """The output cannot be written (exists, folder missing or unwritable)."""
+
+
+def one_line(text: object, limit: int = 300) -> str:
+    """Text from elsewhere (a parser's exception) made fit for a one-line message."""
+    flat = " ".join(str(text).split())
+    flat = "".join(c if c.isprintable() else "?" for c in flat)
+    return flat if len(flat) <= limit else flat[: limit - 3] + "..."

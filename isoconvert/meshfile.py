@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FormatError, InputNotFoundError
+from .errors import FormatError, InputNotFoundError, one_line
 from .mesh import Mesh
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl")
@@ -43,7 +43,9 @@ def read_mesh(path: str | Path) -> Mesh:
         kwargs = {"maintain_order": True} if suffix == ".obj" else {}
         loaded = trimesh.load(str(path), process=False, **kwargs)
     except Exception as exc:  # trimesh raises many kinds for a broken file
-        raise FormatError(f"{path}: not a readable {suffix[1:].upper()} mesh ({exc})") from None
+        raise FormatError(
+            f"{path}: not a readable {suffix[1:].upper()} mesh ({one_line(exc)})"
+        ) from None
     if isinstance(loaded, trimesh.Scene):
         geometry = list(loaded.geometry.values())
         meshes = [g for g in geometry if isinstance(g, trimesh.Trimesh)]

@@ -7,7 +7,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import FormatError, InputNotFoundError, IsoconvertError, VolumeError
+from ..errors import FormatError, InputNotFoundError, IsoconvertError, VolumeError, one_line
 from ..registry import Registry
 from ..volume import Volume
 from .image import IMAGE_SUFFIXES, read_image
@@ -153,8 +153,15 @@ def read_volume(
         # The parsers (pynrrd, tifffile, Pillow) raise many kinds of exceptions on
         # corrupt input; each is a fact about the file, not a bug of ours.
         raise FormatError(
-            f"{spec}: not a readable {name} file ({type(exc).__name__}: {exc})"
+            f"{spec}: not a readable {name} file ({type(exc).__name__}: {one_line(exc)})"
         ) from None
+    if volume.data.dtype.kind not in "biuf":
+        raise VolumeError(
+            f"{spec}: samples of type {volume.data.dtype} are not real numbers; isoconvert "
+            "contours scalar volumes (convert to a real type first, e.g. the magnitude)"
+        )
+    if volume.data.size == 0:
+        raise VolumeError(f"{spec}: the volume is empty (shape {volume.shape})")
     if spacing is not None or origin is not None:
         volume = volume.with_placement(spacing, origin)
         volume.notes.append("spacing/origin set on the command line")

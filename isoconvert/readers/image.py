@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError, VolumeError
+from ..errors import FormatError, VolumeError, one_line
 from ..volume import Volume
 from .options import ReadOptions
 
@@ -45,7 +45,7 @@ def read_image(path: Path, options: ReadOptions) -> Volume:
                 array = np.asarray(img.convert("L"))
                 notes.append(f"{img.mode} image converted to gray (luma); --channel N picks a band")
     except (UnidentifiedImageError, OSError, SyntaxError) as exc:
-        raise FormatError(f"{path}: not a readable image ({exc})") from None
+        raise FormatError(f"{path}: not a readable image ({one_line(exc)})") from None
     if array.ndim != 2:
         raise VolumeError(f"{path}: expected a 2D image, got shape {array.shape}")
     return Volume.from_zyx(np.ascontiguousarray(array), source=str(path), notes=notes)

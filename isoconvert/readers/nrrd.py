@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError, VolumeError
+from ..errors import FormatError, VolumeError, one_line
 from ..memory import check_fits
 from ..volume import Volume
 from .options import ReadOptions, select_channel
@@ -28,7 +28,7 @@ def read_nrrd(path: Path, options: ReadOptions) -> Volume:
     try:
         header = nrrd.read_header(str(path))
     except (nrrd.NRRDError, UnicodeDecodeError, ValueError, IndexError) as exc:
-        raise FormatError(f"{path}: not a readable NRRD header ({exc})") from None
+        raise FormatError(f"{path}: not a readable NRRD header ({one_line(exc)})") from None
     _check_declared_size(path, header)
     data_file = str(header.get("data file", header.get("datafile", "")))
     try:
@@ -44,7 +44,7 @@ def read_nrrd(path: Path, options: ReadOptions) -> Volume:
     except FileNotFoundError as exc:
         raise FormatError(f"{path}: its data file {exc.filename} is missing") from None
     except (nrrd.NRRDError, OSError, ValueError, EOFError) as exc:
-        raise FormatError(f"{path}: the NRRD data cannot be read ({exc})") from None
+        raise FormatError(f"{path}: the NRRD data cannot be read ({one_line(exc)})") from None
     data, domain = _domain_axes(path, header, data, options.channel)
     spacing, direction, notes = _placement(header, domain)
     origin = header.get("space origin")
@@ -77,7 +77,9 @@ def _check_declared_size(path: Path, header: dict) -> None:
         # the byte order does not change the size (and 1-byte types may omit it)
         itemsize = _determine_datatype({**header, "endian": "little"}).itemsize
     except Exception as exc:  # pynrrd raises several kinds for a bad header
-        raise FormatError(f"{path}: the NRRD header has no usable sizes or type ({exc})") from None
+        raise FormatError(
+            f"{path}: the NRRD header has no usable sizes or type ({one_line(exc)})"
+        ) from None
     if any(s <= 0 for s in sizes):
         raise VolumeError(f"{path}: the NRRD header declares sizes {sizes}; all must be >= 1")
     check_fits(int(np.prod(sizes, dtype=np.float64)) * itemsize, "the declared volume", str(path))

@@ -27,12 +27,13 @@ _DTYPE_ALIASES = {
 _NAME_PATTERN = re.compile(r"_(\d+)x(\d+)(?:x(\d+))?_([a-z]+\d*)$", re.IGNORECASE)
 
 
-def dtype_from_name(name: str) -> np.dtype:
+def dtype_from_name(name: str, source: str = "") -> np.dtype:
     """The numpy dtype for a sample-type name; the error lists the accepted names."""
     key = _DTYPE_ALIASES.get(name.lower(), name.lower())
     if key not in SUPPORTED_DTYPES:
+        where = f"{source}: " if source else ""
         raise VolumeError(
-            f"unknown sample type {name!r} for --dtype; "
+            f"{where}unknown sample type {name!r} for --dtype; "
             f"choose one of: {', '.join(SUPPORTED_DTYPES)}"
         )
     return np.dtype(key)
@@ -83,10 +84,12 @@ def read_raw(path: Path, options: ReadOptions) -> Volume:
             f"got {' '.join(map(str, shape))}"
         )
     if options.endian not in ("little", "big"):
-        raise VolumeError(f"--endian must be 'little' or 'big', got {options.endian!r}")
+        raise VolumeError(f"{path}: --endian must be 'little' or 'big', got {options.endian!r}")
     if options.header_bytes < 0:
-        raise VolumeError(f"--header-bytes must be >= 0, got {options.header_bytes}")
-    dtype = dtype_from_name(dtype_name).newbyteorder("<" if options.endian == "little" else ">")
+        raise VolumeError(f"{path}: --header-bytes must be >= 0, got {options.header_bytes}")
+    dtype = dtype_from_name(dtype_name, str(path)).newbyteorder(
+        "<" if options.endian == "little" else ">"
+    )
     expected = options.header_bytes + int(np.prod(shape)) * dtype.itemsize
     actual = path.stat().st_size
     if actual != expected:

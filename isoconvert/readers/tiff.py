@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError, InputNotFoundError, VolumeError
+from ..errors import FormatError, InputNotFoundError, VolumeError, one_line
 from ..memory import check_fits
 from ..volume import Volume
 from .options import ReadOptions, select_channel
@@ -63,7 +63,7 @@ def read_tiff(path: Path, options: ReadOptions) -> Volume:
                 spacing, unit, notes = _spacing(tif, 3)
             notes.insert(0, f"{len(files)} slices, {files[0].name} .. {files[-1].name}")
     except (tifffile.TiffFileError, ValueError, OSError, IndexError, KeyError) as exc:
-        raise FormatError(f"{spec}: not a readable TIFF ({exc})") from None
+        raise FormatError(f"{spec}: not a readable TIFF ({one_line(exc)})") from None
     if data.dtype == np.bool_:
         data = data.view(np.uint8)
     return Volume.from_zyx(data, spacing=spacing, source=spec, notes=notes, unit=unit)
