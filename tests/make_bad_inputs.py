@@ -110,5 +110,5 @@ def make_bad_inputs(folder: Path) -> dict[str, Case]:
 
 if __name__ == "__main__":
     target = Path(sys.argv[1] if len(sys.argv) > 1 else "bad_inputs")
-    for name, case in make_bad_inputs(target).items():
+    for case in make_bad_inputs(target).values():
         print(f"{case.path}  {' '.join(case.args)}")
