@@ -156,12 +156,16 @@ def _tiff_stack(paths: list[Path]) -> list[Path]:
 
 
 def _add_files(paths: list[Path], root: Path, found, skipped) -> None:
-    consumed = set()
+    # data files named by a detached header beside them are read through it
+    consumed: dict[Path, Path] = {}
+    for folder in {p.parent for p in paths}:
+        for header in folder.glob("*.nhdr"):
+            consumed.update({data: header for data in _nhdr_data_files(header)})
     for p in paths:
-        if p.suffix.lower() == ".nhdr":
-            consumed |= _nhdr_data_files(p)
-    for p in paths:
-        if p.resolve() in consumed:
+        header = consumed.get(p.resolve())
+        if header is not None:
+            if header.resolve() not in {q.resolve() for q in paths}:
+                skipped.append(Skipped(str(p), f"the data of {header.name}; convert that header"))
             continue
         match = READERS.by_suffix(p.suffix)
         if match is None:

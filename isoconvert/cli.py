@@ -53,6 +53,9 @@ RequireOpt = Annotated[
         rich_help_panel="Checks",
     ),
 ]
+VerboseOpt = Annotated[
+    bool, typer.Option("--verbose", "-v", help="Say what happens, step by step, with times.")
+]
 ExamplesOpt = Annotated[
     int, typer.Option(help="Examples to list per kind of problem.", rich_help_panel="Checks")
 ]
@@ -100,8 +103,13 @@ def _interactive() -> bool:
 
 
 @contextmanager
-def _stage_display(quiet: bool):
-    """A spinner naming the stage (reading, extracting, writing) on a terminal."""
+def _stage_display(quiet: bool, verbose: bool = False):
+    """A spinner naming the stage (reading, extracting, writing) on a terminal;
+    with ``verbose``, a timed line per stage instead (also when not a terminal)."""
+    if verbose and not quiet:
+        start = time.perf_counter()
+        yield lambda stage: print(f"{time.perf_counter() - start:7.2f} s  {stage}", file=sys.stderr)
+        return
     if quiet or not _interactive():
         yield None
         return
@@ -213,6 +221,7 @@ def convert(
     require: RequireOpt = None,
     examples: ExamplesOpt = 5,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only errors.")] = False,
+    verbose: VerboseOpt = False,
     input_format: InputFormatOpt = None,
     shape: ShapeOpt = None,
     dtype: DtypeOpt = None,
@@ -229,7 +238,7 @@ def convert(
     from .convert import convert as run_convert
 
     start = time.perf_counter()
-    with _stage_display(quiet) as on_progress:
+    with _stage_display(quiet, verbose) as on_progress:
         result = run_convert(
             input,
             output,
@@ -353,6 +362,7 @@ def batch(
     ] = None,
     require: RequireOpt = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only errors.")] = False,
+    verbose: VerboseOpt = False,
     shape: ShapeOpt = None,
     dtype: DtypeOpt = None,
     endian: EndianOpt = Endian.little,
@@ -361,7 +371,7 @@ def batch(
 ) -> None:
     """Convert many volumes: files, folders (--recursive) and globs, in parallel."""
     from . import batch as batching
-    from .readers.tiff import natural_key
+    from .readers.tiff import natural_text_key
     from .report import parse_requirements
 
     required = parse_requirements(require)
@@ -408,12 +418,12 @@ def batch(
     if work:
         out_dir.mkdir(parents=True, exist_ok=True)
     workers = max(1, min(jobs or os.cpu_count() or 1, len(work) or 1))
-    with _batch_display(quiet, len(work)) as on_done:
+    with _batch_display(quiet, len(work), verbose) as on_done:
         try:
             outcomes += batching.run_jobs(work, settings, workers, budget, on_done)
         except KeyboardInterrupt:
             raise typer.Exit(130) from None  # main() says so
-    outcomes.sort(key=lambda o: natural_key(Path(o.input)))
+    outcomes.sort(key=lambda o: natural_text_key(o.input))
     if summary is not None:
         from .atomic import atomic_output
 
@@ -454,18 +464,28 @@ def _default_budget() -> int | None:
 
 
 @contextmanager
-def _batch_display(quiet: bool, total: int):
-    """Files done of total with ETA on a terminal; failures as lines on stderr."""
+def _batch_display(quiet: bool, total: int, verbose: bool = False):
+    """Files done of total with ETA on a terminal; failures as lines on stderr
+    (with ``verbose``, every file as it finishes)."""
+    count = [0]
 
     def report_failure(outcome, console=None):
+        count[0] += 1
+        line = None
         if outcome.status in ("failed", "check-failed") and not quiet:
             line = f"isoconvert: {outcome.message}"
+        elif verbose and not quiet:
+            line = (
+                f"[{count[0]}/{total}] {outcome.status} {outcome.input} -> {outcome.output} "
+                f"({outcome.cells or 0:,} cells, {outcome.seconds:.2f} s)"
+            )
+        if line:
             if console is not None:
                 console.print(line, markup=False, highlight=False)
             else:
                 print(line, file=sys.stderr)
 
-    if quiet or not _interactive() or total == 0:
+    if quiet or verbose or not _interactive() or total == 0:
         yield report_failure
         return
     from rich.console import Console

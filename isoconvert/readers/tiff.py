@@ -18,7 +18,12 @@ TIFF_SUFFIXES = (".tif", ".tiff")
 
 def natural_key(path: Path) -> list:
     """Sort key putting slice2 before slice10."""
-    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
+    return natural_text_key(path.name)
+
+
+def natural_text_key(text: str) -> list:
+    """Sort key comparing runs of digits as numbers ("a2/b" before "a10/b")."""
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", text)]
 
 
 def slice_files(spec: str) -> list[Path]:

@@ -1,0 +1,228 @@
+"""Batch conversion: discovery, names, level mappings, resuming, workers, summaries."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+
+import nrrd
+import numpy as np
+import pytest
+import tifffile
+import trimesh
+
+from isoconvert.batch import discover, read_mapping
+from isoconvert.cli import EXIT_CHECK_FAILED, main
+from isoconvert.errors import IsoconvertError
+
+
+def ball(n=10, r=3.0):
+    x, y, z = np.mgrid[:n, :n, :n]
+    c = (n - 1) / 2
+    return (r - np.sqrt((x - c) ** 2 + (y - c) ** 2 + (z - c) ** 2)).astype(np.float32)
+
+
+@pytest.fixture
+def tree(tmp_path):
+    """in/ with a raw file, a TIFF slice folder, a detached NRRD, a note, a sub-folder
+    and a symbolic link back to the top."""
+    root = tmp_path / "in"
+    (root / "slices").mkdir(parents=True)
+    (root / "sub").mkdir()
+    data = ball()  # (x, y, z) symmetric, so order does not matter here
+    np.ascontiguousarray(data.T).tofile(root / "ball_10x10x10_float32.raw")
+    for k in range(10):
+        tifffile.imwrite(root / "slices" / f"img{k}.tif", data[:, :, k].T)
+    nrrd.write(
+        str(root / "head.nhdr"), data, {"encoding": "raw"}, detached_header=True, index_order="F"
+    )
+    (root / "notes.txt").write_text("not a volume")
+    np.ascontiguousarray(data.T).tofile(root / "sub" / "deep_10x10x10_float32.raw")
+    os.symlink("..", root / "sub" / "loop")
+    return root
+
+
+def test_discovery_counts_stacks_and_headers_once(tree):
+    # without --recursive only the folder's own files count
+    found, skipped = discover([str(tree)], recursive=False)
+    names = sorted(str(f.relative) for f in found)
+    assert names == ["ball_10x10x10_float32.raw", "head.nhdr"]  # head.raw belongs to head.nhdr
+    assert [s.path for s in skipped] == [str(tree / "notes.txt")]
+    # a folder of slices named as an input is one volume
+    found, _ = discover([str(tree / "slices")])
+    assert [str(f.relative) for f in found] == ["slices"]
+
+
+def test_recursive_discovery_survives_a_symlink_loop(tree):
+    found, skipped = discover([str(tree)], recursive=True)
+    names = sorted(str(f.relative) for f in found)
+    assert names == [
+        "ball_10x10x10_float32.raw",
+        "head.nhdr",
+        "slices",
+        "sub/deep_10x10x10_float32.raw",
+    ]
+    assert any("already searched" in s.reason for s in skipped)
+
+
+def test_glob_and_missing_inputs(tree):
+    found, _ = discover([str(tree / "*.raw")])
+    assert [f.relative.name for f in found] == ["ball_10x10x10_float32.raw"]
+    with pytest.raises(IsoconvertError, match="matches nothing"):
+        discover([str(tree / "*.nothing")])
+    with pytest.raises(IsoconvertError, match="no such file"):
+        discover([str(tree / "absent")])
+
+
+def test_batch_mirrors_names_and_writes_a_summary(tree, tmp_path, capsys):
+    out = tmp_path / "out"
+    summary = tmp_path / "summary.csv"
+    code = main(
+        [
+            "batch",
+            str(tree),
+            "-o",
+            str(out),
+            "-l",
+            "0.5",
+            "-r",
+            "--summary",
+            str(summary),
+            "--require",
+            "watertight",
+            "-j",
+            "1",
+        ]
+    )
+    assert code == 0
+    made = sorted(str(p.relative_to(out)) for p in out.rglob("*.ply"))
+    assert made == [
+        "ball_10x10x10_float32.ply",
+        "head.ply",
+        "slices.ply",
+        "sub/deep_10x10x10_float32.ply",
+    ]
+    for p in out.rglob("*.ply"):
+        assert trimesh.load(p, process=False).is_watertight
+    rows = list(csv.DictReader(summary.open()))
+    statuses = {os.path.basename(r["input"]): r["status"] for r in rows}
+    assert statuses["notes.txt"] == statuses["loop"] == "skipped"
+    assert all(v == "ok" for k, v in statuses.items() if k not in ("notes.txt", "loop"))
+    assert all(r["checks"] == "watertight=pass" for r in rows if r["status"] == "ok")
+    table = capsys.readouterr().out
+    assert "4 ok" in table and "2 skipped" in table
+
+
+def test_one_failure_never_stops_the_others(tree, tmp_path, capsys):
+    (tree / "broken.nrrd").write_bytes(b"NRRD0004\ngarbage")
+    out = tmp_path / "out"
+    summary = tmp_path / "s.json"
+    code = main(
+        ["batch", str(tree), "-o", str(out), "-l", "0.5", "--summary", str(summary), "-j", "1"]
+    )
+    assert code == 1
+    data = json.loads(summary.read_text())
+    assert data["totals"]["failed"] == 1 and data["totals"]["ok"] == 2
+    (failed,) = [f for f in data["files"] if f["status"] == "failed"]
+    assert failed["input"].endswith("broken.nrrd") and "broken.nrrd" in failed["message"]
+    assert "broken.nrrd" in capsys.readouterr().err
+
+
+def test_require_failure_gives_exit_code_4(tree, tmp_path):
+    cut = ball(10, 6.0)  # a ball bigger than the grid: its surface is cut open
+    np.ascontiguousarray(cut.T).tofile(tmp_path / "cut_10x10x10_float32.raw")
+    code = main(
+        [
+            "batch",
+            str(tmp_path / "cut_10x10x10_float32.raw"),
+            "-o",
+            str(tmp_path / "o2"),
+            "-l",
+            "0.5",
+            "--require",
+            "watertight",
+        ]
+    )
+    assert code == EXIT_CHECK_FAILED
+
+
+def test_skip_existing_resumes_and_force_is_needed_to_overwrite(tree, tmp_path):
+    out = tmp_path / "out"
+    args = ["batch", str(tree), "-o", str(out), "-l", "0.5", "-j", "1"]
+    assert main(args) == 0
+    first = {p.name: p.stat().st_mtime_ns for p in out.glob("*.ply")}
+    (out / "head.ply").unlink()  # as if the first run had stopped before it
+    summary = tmp_path / "s.json"
+    assert main([*args, "--skip-existing", "--summary", str(summary)]) == 0
+    statuses = {
+        os.path.basename(f["input"]): f["status"] for f in json.loads(summary.read_text())["files"]
+    }
+    assert statuses["head.nhdr"] == "ok"
+    assert statuses["ball_10x10x10_float32.raw"] == "skipped"
+    for name, mtime in first.items():
+        if name != "head.ply":
+            assert (out / name).stat().st_mtime_ns == mtime
+    # without --force or --skip-existing, existing outputs are failures, kept intact
+    assert main(args) == 1
+    assert all((out / n).stat().st_mtime_ns == m for n, m in first.items() if n != "head.ply")
+
+
+def test_level_mapping_toml_and_csv(tmp_path):
+    raw = tmp_path / "in" / "scan.dat"  # no layout in the name: the mapping gives it
+    raw.parent.mkdir()
+    np.ascontiguousarray(ball().T).tofile(raw)
+    toml = tmp_path / "levels.toml"
+    toml.write_text(
+        '[[volume]]\npattern = "scan*"\nlevel = 0.5\nshape = [10, 10, 10]\n'
+        'dtype = "float32"\nflip = true\n'
+    )
+    out = tmp_path / "out"
+    assert main(["batch", str(raw.parent), "-o", str(out), "--levels", str(toml)]) == 0
+    mesh = trimesh.load(out / "scan.ply", process=False)
+    assert mesh.volume < 0  # flipped
+    table = tmp_path / "levels.csv"
+    table.write_text("pattern,level,shape,dtype\nscan.dat,1.5,10x10x10,float32\n")
+    assert main(["batch", str(raw.parent), "-o", str(out), "--levels", str(table), "--force"]) == 0
+    smaller = trimesh.load(out / "scan.ply", process=False)
+    assert len(smaller.faces) < len(mesh.faces)
+    rules = read_mapping(table)
+    assert rules[0].options == {"shape": (10, 10, 10), "dtype": "float32"}
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[[volume]]\npattern = "x"\ncolour = "red"\n')
+    with pytest.raises(IsoconvertError, match="unknown key"):
+        read_mapping(bad)
+
+
+def test_worker_processes_give_the_same_files(tree, tmp_path):
+    one, two = tmp_path / "one", tmp_path / "two"
+    assert main(["batch", str(tree), "-o", str(one), "-l", "0.5", "-j", "1", "-q"]) == 0
+    assert (
+        main(
+            ["batch", str(tree), "-o", str(two), "-l", "0.5", "-j", "2", "-q", "--max-memory", "1K"]
+        )
+        == 0
+    )  # a budget below every estimate: one at a time
+    for p in one.glob("*.ply"):
+        assert (two / p.name).read_bytes() == p.read_bytes()
+
+
+def test_batch_needs_a_level_and_a_good_summary_name(tree, tmp_path, capsys):
+    assert main(["batch", str(tree), "-o", str(tmp_path / "o")]) == 1
+    assert "--level" in capsys.readouterr().err
+    assert (
+        main(
+            [
+                "batch",
+                str(tree),
+                "-o",
+                str(tmp_path / "o"),
+                "-l",
+                "1",
+                "--summary",
+                str(tmp_path / "s.txt"),
+            ]
+        )
+        == 1
+    )
+    assert ".json or .csv" in capsys.readouterr().err
