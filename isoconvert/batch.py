@@ -319,8 +319,12 @@ def plan(
     skip_existing: bool = False,
     force: bool = False,
     options: dict | None = None,
+    raw_options: dict | None = None,
 ) -> tuple[list[Job], list[Outcome]]:
     """Jobs for the found volumes; outcomes for those skipped because done.
+
+    ``options`` (e.g. spacing) apply to every file, ``raw_options`` (shape,
+    dtype, endian, header bytes) to raw files only; a mapping entry overrides both.
 
     Output names mirror the input paths under ``out_dir`` with ``suffix``. Two
     inputs that would give the same name (``a.nrrd`` and ``a.tif``) keep their
@@ -338,7 +342,13 @@ def plan(
         output = out_dir / name
         rule = next((r for r in rules or [] if r.matches(f.relative)), None)
         job_level = rule.level if rule and rule.level is not None else level
-        job_options = {**(options or {}), **(rule.options if rule else {})}
+        reader = READERS.by_suffix(Path(f.spec).suffix)
+        is_raw = reader is not None and reader[0] == "raw"
+        job_options = {
+            **(options or {}),
+            **((raw_options or {}) if is_raw else {}),
+            **(rule.options if rule else {}),
+        }
         if job_level is None:
             done.append(
                 Outcome(

@@ -388,13 +388,13 @@ def batch(
     rules = batching.read_mapping(levels) if levels else None
     found, skipped = batching.discover(inputs, recursive=recursive, exclude=out_dir)
     numeric_level = None if level is None else (level if level == "auto" else _level(level))
-    read = _read_kwargs(None, shape, dtype, endian, header_bytes, None, spacing, None)
-    read.pop("input_format")
-    read = {k: v for k, v in read.items() if v is not None and k != "origin"}
-    if read.get("endian") == "little":
-        read.pop("endian")
-    if not read.get("header_bytes"):
-        read.pop("header_bytes", None)
+    common = {"spacing": _numbers(spacing, "--spacing")} if spacing else {}
+    raw = {
+        "shape": _numbers(shape, "--shape", int),
+        "dtype": dtype,
+        "endian": endian.value,
+        "header_bytes": header_bytes,
+    }
     work, outcomes = batching.plan(
         found,
         out_dir,
@@ -403,7 +403,8 @@ def batch(
         rules,
         skip_existing=skip_existing,
         force=force,
-        options=read,
+        options=common,
+        raw_options={k: v for k, v in raw.items() if v is not None},
     )
     for item in skipped:
         outcomes.append(batching.Outcome(item.path, "", "skipped", message=item.reason))

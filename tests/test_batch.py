@@ -226,3 +226,15 @@ def test_batch_needs_a_level_and_a_good_summary_name(tree, tmp_path, capsys):
         == 1
     )
     assert ".json or .csv" in capsys.readouterr().err
+
+
+def test_global_raw_options_apply_to_raw_files_only(tree, tmp_path):
+    plain = tmp_path / "mixed"
+    plain.mkdir()
+    np.ascontiguousarray(ball().T).tofile(plain / "scan.dat")  # no layout in the name
+    nrrd.write(str(plain / "other.nrrd"), ball(), index_order="F")
+    out = tmp_path / "out"
+    code = main(["batch", str(plain), "-o", str(out), "-l", "0.5", "--shape", "10", "10", "10",
+                 "--dtype", "float32", "-q"])
+    assert code == 0
+    assert sorted(p.name for p in out.glob("*.ply")) == ["other.ply", "scan.ply"]
