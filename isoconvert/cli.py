@@ -27,7 +27,8 @@ from .writers import WRITERS
 
 app = typer.Typer(
     name="isoconvert",
-    help="Turn scalar volumes (raw, NRRD, TIFF) into isosurface meshes (PLY, OBJ, STL).",
+    help="Turn scalar volumes and images (raw, NRRD, TIFF, PNG, JPEG) into isosurface meshes "
+    "and contours (PLY, OBJ, STL, SVG), and check meshes.",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,

@@ -234,7 +234,22 @@ def test_global_raw_options_apply_to_raw_files_only(tree, tmp_path):
     np.ascontiguousarray(ball().T).tofile(plain / "scan.dat")  # no layout in the name
     nrrd.write(str(plain / "other.nrrd"), ball(), index_order="F")
     out = tmp_path / "out"
-    code = main(["batch", str(plain), "-o", str(out), "-l", "0.5", "--shape", "10", "10", "10",
-                 "--dtype", "float32", "-q"])
+    code = main(
+        [
+            "batch",
+            str(plain),
+            "-o",
+            str(out),
+            "-l",
+            "0.5",
+            "--shape",
+            "10",
+            "10",
+            "10",
+            "--dtype",
+            "float32",
+            "-q",
+        ]
+    )
     assert code == 0
     assert sorted(p.name for p in out.glob("*.ply")) == ["other.ply", "scan.ply"]
