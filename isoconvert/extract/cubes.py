@@ -61,9 +61,25 @@ def marching_cubes(
     with compile_notice(on_status, notice):
         from .kernels.cubes import count_cubes, fill_cubes
 
-        n_vert, n_tri = count_cubes(arr, level, counts)
-        verts = np.empty((n_vert, 3), dtype=np.float64)
-        edge_ids = np.empty(n_vert, dtype=np.int64)
-        tris = np.empty((n_tri, 3), dtype=np.int64)
-        fill_cubes(arr, level, offset, counts, table, EDGE_BASE, EDGE_AXIS, verts, edge_ids, tris)
+        per_slab_vertices, per_slab_triangles = count_cubes(arr, level, counts)
+        # where each slab's output begins, so slabs fill in parallel
+        vert_start = np.concatenate([[0], np.cumsum(per_slab_vertices)])
+        tri_start = np.concatenate([[0], np.cumsum(per_slab_triangles)])
+        verts = np.empty((vert_start[-1], 3), dtype=np.float64)
+        edge_ids = np.empty(vert_start[-1], dtype=np.int64)
+        tris = np.empty((tri_start[-1], 3), dtype=np.int64)
+        fill_cubes(
+            arr,
+            level,
+            offset,
+            counts,
+            table,
+            EDGE_BASE,
+            EDGE_AXIS,
+            vert_start,
+            tri_start,
+            verts,
+            edge_ids,
+            tris,
+        )
     return finish_mesh(volume, verts, tris, edge_ids, flip, method="cubes", level=level)
