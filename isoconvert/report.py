@@ -291,22 +291,6 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
     tv = tris[keep]
     n_u = len(unique)
 
-    # duplicate triangles (same three vertices, either orientation)
-    order, new = row_groups(np.sort(tv, axis=1))
-    starts = np.flatnonzero(new)
-    sizes = np.diff(np.append(starts, len(tv)))
-    dup_groups = np.flatnonzero(sizes > 1)
-    problems["duplicate_triangles"] = _problem(
-        int((sizes[dup_groups] - 1).sum()),
-        [
-            {
-                "triangles": [int(keep[t]) for t in order[starts[g] : starts[g] + sizes[g]]],
-                "position": _pos(unique[tv[order[starts[g]], 0]]),
-            }
-            for g in dup_groups[:n_examples]
-        ],
-    )
-
     # edges of the kept triangles: occurrence o = 3 * i + j runs tv[i, j] -> tv[i, j + 1]
     a = tv.reshape(-1)
     b = np.roll(tv, -1, axis=1).reshape(-1)
@@ -344,6 +328,16 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
     same_way = a[o1] == a[o2]
     problems["inconsistently_oriented_edges"] = _problem(
         same_way.sum(), edge_examples(pairs[same_way])
+    )
+
+    # duplicate triangles (same three vertices, either orientation)
+    duplicates = _duplicate_triangles(tv, o1, o2, len(nonmanifold_edges) == 0)
+    problems["duplicate_triangles"] = _problem(
+        sum(len(g) - 1 for g in duplicates),
+        [
+            {"triangles": [int(keep[t]) for t in g], "position": _pos(unique[tv[g[0], 0]])}
+            for g in duplicates[:n_examples]
+        ],
     )
 
     fans = _fans_per_vertex(a, o1, o2, same_way, n_u, len(nonmanifold_edges) == 0)
@@ -407,7 +401,7 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
         "oriented": bool(oriented),
         "no-zero-length": bool(len(zero) == 0),
         "no-degenerate": bool(not degenerate.any()),
-        "no-duplicates": bool(len(dup_groups) == 0),
+        "no-duplicates": bool(len(duplicates) == 0),
         "no-holes": bool(len(holes) == 0),
     }
     topology = {
@@ -416,6 +410,29 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
         "per_component": components,
     }
     return Report("triangles", counts, checks, problems, topology, measures, frame.name)
+
+
+def _duplicate_triangles(tv, o1, o2, edge_manifold) -> list[list[int]]:
+    """Groups of triangles with the same three vertices (indices into ``tv``).
+
+    When no edge has more than two triangles, two triangles are duplicates
+    exactly when all three of their edges pair them with each other, which the
+    edge pairs (occurrences ``o1``, ``o2``) tell without sorting triangles.
+    """
+    if edge_manifold:
+        partner = np.full(3 * len(tv), -1, dtype=np.int64)
+        partner[o1] = o2 // 3
+        partner[o2] = o1 // 3
+        p = partner.reshape(-1, 3)
+        same = (p[:, 0] >= 0) & (p[:, 0] == p[:, 1]) & (p[:, 1] == p[:, 2])
+        first = np.flatnonzero(same & (np.arange(len(tv)) < p[:, 0]))
+        return [[int(i), int(p[i, 0])] for i in first]
+    order, new = row_groups(np.sort(tv, axis=1))
+    starts = np.flatnonzero(new)
+    sizes = np.diff(np.append(starts, len(tv)))
+    return [
+        [int(t) for t in order[starts[g] : starts[g] + sizes[g]]] for g in np.flatnonzero(sizes > 1)
+    ]
 
 
 def _fans_per_vertex(a, o1, o2, same_way, n_u, edge_manifold) -> np.ndarray:
@@ -458,7 +475,7 @@ def _fans_per_vertex(a, o1, o2, same_way, n_u, edge_manifold) -> np.ndarray:
         # after k rounds, low[c] is the smallest of the 2**k corners from c on and
         # step[c] the corner 2**k on (or the chain's end); a chain or cycle is at
         # most as long as its vertex has corners
-        rounds = int(np.ceil(np.log2(max(2, np.bincount(a).max())))) + 1
+        rounds = int(np.ceil(np.log2(max(2, np.bincount(a).max()))))
         low = np.arange(n, dtype=np.int64)
         step = nxt
         for _ in range(rounds):
