@@ -39,8 +39,12 @@ def main() -> None:
 
     start = time.perf_counter()
     tm = trimesh.Trimesh(mesh.vertices, mesh.cells, process=False)
-    facts = (tm.is_watertight, tm.is_winding_consistent, tm.euler_number,
-             len(tm.split(only_watertight=False)))
+    facts = (
+        tm.is_watertight,
+        tm.is_winding_consistent,
+        tm.euler_number,
+        len(tm.split(only_watertight=False)),
+    )
     theirs = time.perf_counter() - start
     print(f"isoconvert check_mesh  {ours:8.2f} s  (all checks, fans, components, examples)")
     print(f"trimesh                {theirs:8.2f} s  (watertight, winding, Euler, bodies)")

@@ -390,6 +390,12 @@ def run_one(job: Job, settings: dict) -> Outcome:
     from .report import check_mesh
 
     start = time.perf_counter()
+
+    def failed(message: str) -> Outcome:
+        return Outcome(
+            job.input, job.output, "failed", seconds=time.perf_counter() - start, message=message
+        )
+
     options = dict(job.options)
     flip = options.pop("flip", settings.get("flip", False))
     require = settings.get("require") or []
@@ -400,25 +406,11 @@ def run_one(job: Job, settings: dict) -> Outcome:
             job.input, job.output, job.level, flip=flip, force=True, **kwargs, **options
         )
     except IsoconvertError as exc:
-        return Outcome(
-            job.input, job.output, "failed", seconds=time.perf_counter() - start, message=str(exc)
-        )
+        return failed(str(exc))
     except MemoryError:
-        return Outcome(
-            job.input,
-            job.output,
-            "failed",
-            seconds=time.perf_counter() - start,
-            message=f"{job.input}: out of memory; convert it alone or lower --jobs",
-        )
+        return failed(f"{job.input}: out of memory; convert it alone or lower --jobs")
     except Exception as exc:  # a bug: report it for this file, keep the others going
-        return Outcome(
-            job.input,
-            job.output,
-            "failed",
-            seconds=time.perf_counter() - start,
-            message=f"{job.input}: internal error {type(exc).__name__}: {exc}",
-        )
+        return failed(f"{job.input}: internal error {type(exc).__name__}: {exc}")
     mesh = result.mesh
     outcome = Outcome(
         job.input,

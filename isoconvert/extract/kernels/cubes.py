@@ -25,6 +25,21 @@ def _signs(f, level, k, out):
             out[j, i] = f[k, j, i] >= level
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _case(lo, hi, j, i):
+    """Configuration of cube (i, j) between sign layers lo and hi (bit v: vertex v)."""
+    return (
+        lo[j, i]
+        | (lo[j, i + 1] << 1)
+        | (lo[j + 1, i] << 2)
+        | (lo[j + 1, i + 1] << 3)
+        | (hi[j, i] << 4)
+        | (hi[j, i + 1] << 5)
+        | (hi[j + 1, i] << 6)
+        | (hi[j + 1, i + 1] << 7)
+    )
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def count_cubes(f, level, n_triangles):
     """Count, per z-slab, the vertices and triangles of the isosurface.
@@ -69,16 +84,7 @@ def count_cubes(f, level, n_triangles):
                         count += 1
             for j in range(ny - 1):
                 for i in range(nx - 1):
-                    case = (
-                        lo[j, i]
-                        | (lo[j, i + 1] << 1)
-                        | (lo[j + 1, i] << 2)
-                        | (lo[j + 1, i + 1] << 3)
-                        | (hi[j, i] << 4)
-                        | (hi[j, i + 1] << 5)
-                        | (hi[j + 1, i] << 6)
-                        | (hi[j + 1, i + 1] << 7)
-                    )
+                    case = _case(lo, hi, j, i)
                     tris += n_triangles[case]
         n_vert[k] = count
         n_tri[k] = tris
@@ -206,16 +212,7 @@ def fill_cubes(
             m = tri_start[k]
             for j in range(ny - 1):
                 for i in range(nx - 1):
-                    case = (
-                        lo[j, i]
-                        | (lo[j, i + 1] << 1)
-                        | (lo[j + 1, i] << 2)
-                        | (lo[j + 1, i + 1] << 3)
-                        | (hi[j, i] << 4)
-                        | (hi[j, i + 1] << 5)
-                        | (hi[j + 1, i] << 6)
-                        | (hi[j + 1, i + 1] << 7)
-                    )
+                    case = _case(lo, hi, j, i)
                     for t in range(n_triangles[case]):
                         for c in range(3):
                             e = triangles[case, t, c]
