@@ -446,8 +446,10 @@ def run_jobs(
     """Run the jobs, ``workers`` at a time, within ``max_memory`` bytes of estimates.
 
     A job whose estimate alone exceeds the budget runs with nothing else beside
-    it. One failure never stops the others; a worker that dies (killed, out of
-    memory) fails its own job, and the pool is started again for the rest. On
+    it. One failure never stops the others: a worker that dies (killed, out of
+    memory) breaks the pool, so each job that was running is run again alone,
+    which fails only the one that kills its worker; the pool then starts again
+    for the rest. On
     KeyboardInterrupt, jobs not finished are reported as interrupted (their
     outputs are written atomically, so none is left half-written).
     """
@@ -488,37 +490,46 @@ def run_jobs(
                         used += job.estimate
                     finished, _ = wait(running, return_when=FIRST_COMPLETED)
                     for future in finished:
-                        job = running.pop(future)
-                        used -= job.estimate
+                        job = running[future]  # stays there if the pool broke: retried alone
                         try:
-                            done(Outcome(**future.result()))
+                            result = Outcome(**future.result())
                         except BrokenProcessPool:
                             raise
                         except Exception as exc:
-                            done(
-                                Outcome(
-                                    job.input,
-                                    job.output,
-                                    "failed",
-                                    message=f"{job.input}: {type(exc).__name__}: {exc}",
-                                )
+                            result = Outcome(
+                                job.input,
+                                job.output,
+                                "failed",
+                                message=f"{job.input}: {type(exc).__name__}: {exc}",
                             )
+                        del running[future]
+                        used -= job.estimate
+                        done(result)
         except BrokenProcessPool:
+            # A dead worker breaks the whole pool, and with it the jobs beside it.
+            # Run each of those alone: only the one that kills its worker fails.
             for job in running.values():
-                done(
-                    Outcome(
-                        job.input,
-                        job.output,
-                        "failed",
-                        message=f"{job.input}: the worker process died (out of memory?); "
-                        "convert it alone or lower --jobs",
-                    )
-                )
+                done(_run_alone(job, settings, context))
         except KeyboardInterrupt:
             for job in [*running.values(), *pending]:
                 done(Outcome(job.input, job.output, "interrupted", message="interrupted"))
             raise
     return outcomes
+
+
+def _run_alone(job: Job, settings: dict, context) -> Outcome:
+    """Run one job in a worker of its own; a worker that dies fails only this job."""
+    try:
+        with ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
+            return Outcome(**pool.submit(_run_one_dict, asdict(job), settings).result())
+    except BrokenProcessPool:
+        return Outcome(
+            job.input,
+            job.output,
+            "failed",
+            message=f"{job.input}: the worker process died (out of memory?); "
+            "convert it alone or lower --jobs",
+        )
 
 
 # --- summary ----------------------------------------------------------------------------------

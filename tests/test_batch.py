@@ -253,3 +253,67 @@ def test_global_raw_options_apply_to_raw_files_only(tree, tmp_path):
     )
     assert code == 0
     assert sorted(p.name for p in out.glob("*.ply")) == ["other.ply", "scan.ply"]
+
+
+DYING_PLUGIN = '''
+import os
+from isoconvert.extract.cubes import marching_cubes
+
+
+def run(volume, level, **kw):
+    """Marching Cubes, except that it kills its process on 7-wide volumes."""
+    if volume.shape[0] == 7:
+        os._exit(3)
+    return marching_cubes(volume, level, **kw)
+'''
+
+
+def test_a_dying_worker_fails_only_its_file(tmp_path, monkeypatch):
+    from isoconvert import EXTRACTORS
+
+    (tmp_path / "dying.py").write_text(DYING_PLUGIN)
+    dist = tmp_path / "dying-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: dying\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[isoconvert.extractors]\ndying = dying:run\n")
+    monkeypatch.syspath_prepend(str(tmp_path))  # spawned workers get the parent's sys.path
+    EXTRACTORS.reload_plugins()
+    try:
+        inputs = tmp_path / "in"
+        inputs.mkdir()
+        for n in (7, 10, 11, 12):
+            np.ascontiguousarray(ball(n).T).tofile(inputs / f"b{n}_{n}x{n}x{n}_float32.raw")
+        summary = tmp_path / "s.json"
+        code = main(
+            [
+                "batch",
+                str(inputs),
+                "-o",
+                str(tmp_path / "out"),
+                "-l",
+                "0.5",
+                "--method",
+                "dying",
+                "-j",
+                "2",
+                "-q",
+                "--summary",
+                str(summary),
+            ]
+        )
+        assert code == 1
+        rows = {os.path.basename(r["input"]): r for r in json.loads(summary.read_text())["files"]}
+        assert rows["b7_7x7x7_float32.raw"]["status"] == "failed"
+        assert "worker process died" in rows["b7_7x7x7_float32.raw"]["message"]
+        # files running beside it when it died are run again alone: all convert
+        ok = sorted(k for k, r in rows.items() if r["status"] == "ok")
+        assert ok == [
+            "b10_10x10x10_float32.raw",
+            "b11_11x11x11_float32.raw",
+            "b12_12x12x12_float32.raw",
+        ]
+        for name in ok:
+            assert (tmp_path / "out" / name.replace(".raw", ".ply")).exists()
+    finally:
+        monkeypatch.undo()
+        EXTRACTORS.reload_plugins()
