@@ -517,9 +517,30 @@ def _batch_display(quiet: bool, total: int, verbose: bool = False):
         yield on_done
 
 
+def _collapse_skipped(outcomes, limit: int = 3):
+    """Skipped files of one folder, suffix and reason as one row when there are many."""
+    groups: dict = {}
+    for o in outcomes:
+        if o.status == "skipped" and not o.output:
+            p = Path(o.input)
+            groups.setdefault((str(p.parent), p.suffix, o.message), []).append(o)
+    shown, done = [], set()
+    for o in outcomes:
+        p = Path(o.input)
+        key = (str(p.parent), p.suffix, o.message)
+        group = groups.get(key) if o.status == "skipped" and not o.output else None
+        if group is None or len(group) <= limit:
+            shown.append(o)
+        elif key not in done:
+            done.add(key)
+            name = f"{p.parent / ('*' + p.suffix)} ({len(group)} files)"
+            shown.append(type(o)(name, "", "skipped", message=o.message))
+    return shown
+
+
 def _print_batch_table(outcomes) -> None:
     rows = [("file", "level", "vertices", "cells", "seconds", "checks", "status")]
-    for o in outcomes:
+    for o in _collapse_skipped(outcomes):
         checks = (
             ""
             if o.checks is None

@@ -317,3 +317,28 @@ def test_a_dying_worker_fails_only_its_file(tmp_path, monkeypatch):
     finally:
         monkeypatch.undo()
         EXTRACTORS.reload_plugins()
+
+
+def test_table_collapses_many_skipped_files_of_one_kind(tree, tmp_path, capsys):
+    for n in range(5):
+        (tree / f"slice{n}.dcm").write_bytes(b"DICM")
+    json_summary = tmp_path / "s.json"
+    main(
+        [
+            "batch",
+            str(tree),
+            "-o",
+            str(tmp_path / "o"),
+            "-l",
+            "0.5",
+            "-j",
+            "1",
+            "--summary",
+            str(json_summary),
+        ]
+    )
+    table = capsys.readouterr().out
+    assert "*.dcm (5 files)" in table and "slice3.dcm" not in table
+    # the summary file keeps every file
+    files = [f["input"] for f in json.loads(json_summary.read_text())["files"]]
+    assert sum(f.endswith(".dcm") for f in files) == 5
