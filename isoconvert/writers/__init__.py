@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
-from ..atomic import atomic_output, check_output
+from ..atomic import atomic_output
 from ..errors import FormatError
 from ..mesh import Mesh
 from ..registry import Registry
@@ -100,7 +100,6 @@ def write_mesh(
         kind = {2: "contour segments", 3: "triangles"}.get(size, f"{size}-vertex cells")
         fits = [n for n, w in WRITERS.items() if size in w.cell_sizes]
         raise FormatError(f"{path}: {writer.name} cannot hold {kind}; write {' or '.join(fits)}")
-    check_output(path, force)
     with atomic_output(path, force) as fh:
         writer.write(mesh, fh, ascii or not writer.has_binary)
     return Path(path)
