@@ -9,6 +9,7 @@ numba's compile happens in a warm-up run first.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -17,7 +18,10 @@ import numpy as np
 import isoconvert
 from isoconvert import Volume, extract
 
-DATASETS = Path(__file__).resolve().parent.parent.parent / "shared" / "datasets"
+DATASETS = Path(
+    os.environ.get("ISOCONVERT_DATASETS")
+    or Path(__file__).resolve().parent.parent.parent / "shared" / "datasets"
+)
 SCANS = [
     ("engine_256x256x128_uint8.raw", 80.5),
     ("embryo_256x256x256_uint8.raw", 60.5),
@@ -68,7 +72,7 @@ def main() -> None:
     for name, level in SCANS:
         path = DATASETS / name
         if not path.exists():
-            print(f"{name:<38} skipped: not in {DATASETS}")
+            print(f"{name:<38} skipped: not in {DATASETS} (set ISOCONVERT_DATASETS)")
             continue
         vol = isoconvert.read_volume(path)
         data = np.ascontiguousarray(vol.data.T).T  # in memory, as every peer gets it

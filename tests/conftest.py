@@ -3,21 +3,26 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-DATASETS = ROOT.parent / "shared" / "datasets"
+#: The real scans: $ISOCONVERT_DATASETS, else ../shared/datasets beside the repository.
+DATASETS = Path(os.environ.get("ISOCONVERT_DATASETS") or ROOT.parent / "shared" / "datasets")
 SAMPLES = ROOT / "sample_volumes"
 
 
 def dataset(name: str) -> Path:
-    """Path of a real scan, or skip the test when the datasets folder is absent."""
+    """Path of a real scan, or skip the test when it is not there."""
     path = DATASETS / name
     if not path.exists():
-        pytest.skip(f"real dataset {name} not found in {DATASETS} (clone shared/ beside the repo)")
+        pytest.skip(
+            f"real dataset {name} not found in {DATASETS}; set "
+            "ISOCONVERT_DATASETS=/path/to/datasets (or put shared/datasets beside the repository)"
+        )
     return path
 
 
