@@ -14,6 +14,11 @@ the same samples, so they must give identical meshes.
 - two_spheres: book section 1.3: two balls of radius 5 touching at grid vertex
   (14, 10, 10); values 5 - distance to the nearer centre (float32), level 0. The
   touching point has exactly the isovalue.
+- figure_2_4: the 5x5 grid of the book's Figure 2.4 (isovalue 5; one sample
+  equals 5), a 2D image written as raw and NRRD only. The figure's rows are
+  printed top row first with y pointing up, so printed row r is y = 4 - r and
+  column c is x = c. (A TIFF or PNG would show it upside down, since image rows
+  run downward.)
 """
 
 from __future__ import annotations
@@ -48,7 +53,24 @@ def two_spheres() -> np.ndarray:
     return (5.0 - np.minimum(d1, d2)).astype(np.float32)
 
 
+#: Figure 2.4's values as the book prints them, top row first.
+FIGURE_2_4_ROWS = (
+    (8, 9, 7, 6, 3),
+    (7, 3, 5, 3, 2),
+    (8, 1, 7, 8, 4),
+    (8, 6, 4, 2, 6),
+    (9, 8, 3, 7, 6),
+)
+
+
+def figure_2_4() -> np.ndarray:
+    """(5, 5) uint8 in x, y order: printed row r is y = 4 - r, column c is x = c."""
+    return np.array(FIGURE_2_4_ROWS, dtype=np.uint8)[::-1].T.copy()
+
+
 SAMPLES = {"torus": torus, "sphere": sphere, "two_spheres": two_spheres}
+#: 2D samples: written as raw and NRRD only (see figure_2_4 above).
+IMAGES = {"figure_2_4": figure_2_4}
 
 
 def write_all(folder: Path = HERE) -> list[Path]:
@@ -75,6 +97,14 @@ def write_all(folder: Path = HERE) -> list[Path]:
             metadata={"spacing": 1.0, "axes": "ZYX"},
         )
         written += [raw, nrrd_path, tif]
+    for name, make in IMAGES.items():
+        data = make()  # (X, Y)
+        dims = "x".join(map(str, data.shape))
+        raw = folder / f"{name}_{dims}_{data.dtype.name}.raw"
+        np.ascontiguousarray(data.T).tofile(raw)
+        nrrd_path = folder / f"{name}.nrrd"
+        nrrd.write(str(nrrd_path), data, {"spacings": [1.0, 1.0]}, index_order="F")
+        written += [raw, nrrd_path]
     return written
 
 

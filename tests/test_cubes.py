@@ -226,3 +226,39 @@ def test_oblique_space_directions_flair():
     assert np.array_equal(mesh.cells, index_mesh.cells[:, ::-1] if mirrored else index_mesh.cells)
     # orientation survives the map: the bright brain's surface points outward
     assert np.sign(mesh.signed_volume()) == np.sign(index_mesh.signed_volume())
+
+
+@pytest.mark.parametrize(
+    ("name", "level"), [("engine_256x256x128_uint8.raw", 80), ("tooth_103x94x161_uint8.raw", 100)]
+)
+def test_integer_level_on_integer_data_keeps_vtk_counts_without_degenerate_elements(name, level):
+    """At a level equal to sample values, VTK (and exact placement) put vertices
+    on those samples: zero-length edges and collapsed triangles. The default
+    placement keeps them 0.001 of an edge away: the same vertex and triangle
+    counts as VTK, no vertex moved by more than 0.001 of an edge, and no
+    degenerate element."""
+    from isoconvert.report import check_mesh
+
+    vol = isoconvert.read_volume(dataset(name))
+    zyx = np.ascontiguousarray(vol.data.T)
+    assert (zyx == level).any(), "the level must equal some samples"
+    notices = []
+    mesh = extract(vol, level, on_status=notices.append)
+    exact = extract(vol, level, vertex_offset=0.0)
+    points, cells = vtk_flying_edges(zyx, level)
+    assert mesh.n_vertices == exact.n_vertices == len(points)
+    assert mesh.n_cells == exact.n_cells == len(cells)
+    assert np.array_equal(mesh.cells, exact.cells)
+    shift = np.abs(mesh.vertices - exact.vertices).max(axis=1)
+    assert shift.max() <= 1e-3 + 1e-12 and (shift > 0).any()
+    assert any(f"equals {np.count_nonzero(zyx == level):,} samples" in n for n in notices)
+    ours = check_mesh(mesh)
+    theirs = check_mesh(as_mesh(points, cells))
+    assert theirs.problems["zero_length_edges"]["count"] > 0
+    assert ours.problems["zero_length_edges"]["count"] == 0
+    assert ours.problems["degenerate_triangles"]["count"] == 0
+    assert ours.checks["manifold"] and ours.checks["oriented"]
+
+
+def as_mesh(points, cells):
+    return isoconvert.Mesh(np.asarray(points, np.float64), np.asarray(cells, np.int64))

@@ -15,7 +15,12 @@ from isoconvert.mesh import polylines
 
 
 def contour(grid_yx, level, **kw):
-    """Contour a (rows, cols) array; return vertices (V, 2) in (x, y), segments, edge ids."""
+    """Contour a (rows, cols) array; return vertices (V, 2) in (x, y), segments, edge ids.
+
+    Vertices are placed exactly (``vertex_offset=0``), as the book places them,
+    unless a test asks otherwise: these tests are about the book's cases.
+    """
+    kw.setdefault("vertex_offset", 0.0)
     mesh = extract(Volume.from_zyx(np.asarray(grid_yx)), level, method="squares", **kw)
     return mesh.vertices[:, :2], mesh.cells, mesh.edge_ids
 

@@ -29,6 +29,7 @@ from ..mesh import Mesh
 from ..registry import Registry
 from ..volume import Volume
 from .cubes import marching_cubes
+from .prepare import count_equal
 from .squares import SQUARE_AMBIGUITY_RULES, marching_squares
 from .tables import AMBIGUITY_RULES, DEFAULT_AMBIGUITY
 from .tetra import marching_tetrahedra
@@ -150,7 +151,9 @@ def extract(
         Method-specific options: ``axis`` (squares on 3D volumes),
         ``vertex_offset`` (built-ins: keep vertices this fraction of their edge
         away from grid vertices, so that a level equal to grid values makes no
-        zero-length edges; :data:`NO_DEGENERATE_OFFSET` is the CLI's choice).
+        zero-length edges). Left out or None, it is :data:`NO_DEGENERATE_OFFSET`
+        when some sample equals the level and 0 otherwise (a notice says so);
+        0 places every vertex exactly by linear interpolation.
 
     Returns
     -------
@@ -175,6 +178,11 @@ def extract(
         raise IsoconvertError(f"{name} has no option {', '.join(sorted(stray))}")
     if isinstance(level, str):
         level = resolve_level(volume, level, on_status)
+    placement_note = None
+    if "vertex_offset" in extractor.options:
+        options["vertex_offset"], placement_note = _vertex_offset(
+            volume, float(level), options.get("vertex_offset")
+        )
     mesh = extractor.run(
         volume,
         float(level),
@@ -185,7 +193,48 @@ def extract(
         **options,
     )
     _check_result(name, mesh)
+    if "vertex_offset" in options:
+        mesh.info["vertex_offset"] = options["vertex_offset"]
+    if placement_note and on_status:  # only once the level proved usable
+        on_status(placement_note)
     return mesh
+
+
+def _vertex_offset(volume: Volume, level: float, given: float | None) -> tuple[float, str | None]:
+    """The vertex offset to use, and a notice for the user (or None).
+
+    ``given`` is used as it is, except None (automatic): then
+    :data:`NO_DEGENERATE_OFFSET` when some sample equals the level, else 0.
+    With the sign rule (positive when value >= level) the connectivity at a
+    level equal to sample values is that of a level a hair below, so keeping
+    vertices a thousandth of their edge away from those samples changes no
+    count (vertices and triangles stay equal to VTK's) and removes every
+    zero-length edge and collapsed triangle.
+    """
+    if given is not None and given != 0:
+        return given, None
+    equal = count_equal(volume.data, level) if np.isfinite(level) else 0
+    if not equal:
+        return 0.0, None
+    samples = f"{equal:,} sample{'s' if equal > 1 else ''}"
+    if given is None:
+        return NO_DEGENERATE_OFFSET, (
+            f"level {level:g} equals {samples}: the vertices there are kept "
+            f"{NO_DEGENERATE_OFFSET:g} of an edge away from them, so the mesh has no "
+            "zero-length edges (--exact-placement puts them on the samples)"
+        )
+    between = _between_levels(volume.data, level)
+    return given, (
+        f"level {level:g} equals {samples}: expect zero-length edges and degenerate cells "
+        f"there; use --level {between:g}, or drop --exact-placement"
+    )
+
+
+def _between_levels(data: np.ndarray, level: float) -> float:
+    """A level just below ``level`` that no sample of an integer type can equal."""
+    if np.issubdtype(data.dtype, np.integer) or data.dtype == np.bool_:
+        return level - 0.5
+    return float(np.nextafter(level, -np.inf))
 
 
 def _check_result(name: str, mesh: object) -> None:

@@ -41,6 +41,11 @@ def kernel_array(
     """
     src = volume.source
     data = volume.data
+    if nan_as is not None and not np.isfinite(nan_as):
+        raise VolumeError(
+            f"{src}: --nan-as takes a finite number (the value NaN/Inf samples stand for), "
+            f"got {nan_as}; e.g. --nan-as 0"
+        )
     if data.ndim != ndim:
         hint = (
             "use --method squares for a 2D image"
@@ -136,3 +141,35 @@ def check_vertex_offset(offset: float) -> float:
     if not 0.0 <= offset < 0.5:
         raise VolumeError(f"the vertex offset must be in [0, 0.5), got {offset:g}")
     return offset
+
+
+def count_equal(data: np.ndarray, level: float) -> int:
+    """How many samples equal ``level`` exactly (slab by slab, no full-size temporary).
+
+    Parameters
+    ----------
+    data : (X, Y, Z) or (X, Y) array
+    level : float
+
+    Returns
+    -------
+    int
+        0 at once, without a scan, when no sample of this type can equal
+        ``level`` (a level that is not a whole number for integer samples, or
+        not representable in the samples' floating-point type).
+    """
+    level = float(level)
+    if data.dtype == np.bool_:
+        data = data.view(np.uint8)
+    if np.issubdtype(data.dtype, np.integer):
+        info = np.iinfo(data.dtype)
+        if not level.is_integer() or not info.min <= level <= info.max:
+            return 0
+        target = data.dtype.type(int(level))
+    elif np.issubdtype(data.dtype, np.floating):
+        if float(data.dtype.type(level)) != level:  # e.g. 0.1 against float32 samples
+            return 0
+        target = level
+    else:
+        return 0
+    return sum(int(np.count_nonzero(slab == target)) for slab in slabs(data))

@@ -1,0 +1,65 @@
+"""Geometric predicates shared by the report and the writers.
+
+One definition of "degenerate" for everything that judges a mesh: the report,
+and the writers deciding whether a lower precision would make new degenerate
+triangles.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: A triangle is flat when twice its area is at most this many float64 rounding
+#: units of the cross product computed from its coordinates (see :func:`flat_triangles`).
+FLAT_ROUNDING_UNITS = 8.0
+
+
+def triangle_cross(vertices: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Cross products ``(p1 - p0) x (p2 - p0)`` of each triangle.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    cells : (C, 3) int
+
+    Returns
+    -------
+    (C, 3) float64
+        Their norms are twice the triangles' areas; their directions the
+        right-hand normals.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    p0 = v[cells[:, 0]]
+    return np.cross(v[cells[:, 1]] - p0, v[cells[:, 2]] - p0)
+
+
+def flat_triangles(vertices: np.ndarray, cells: np.ndarray, cross: np.ndarray) -> np.ndarray:
+    """Triangles whose area is zero within the rounding error of their coordinates.
+
+    The cross product of two edge vectors is computed from coordinates of
+    magnitude up to ``m`` (the triangle's largest absolute coordinate), so its
+    rounding error is about ``eps * m * l`` (``l`` its longest edge, ``eps`` the
+    float64 machine epsilon). A triangle is flat when ``|cross| <= k * eps * m * l``
+    with ``k`` = :data:`FLAT_ROUNDING_UNITS`: an exactly collinear triangle, or a
+    sliver of area 1e-18 on a unit-size mesh, is flat; a small but well-formed
+    triangle far from the origin is not. The test is scale-free: scaling a mesh
+    does not change which triangles are flat.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    cells : (C, 3) int
+    cross : (C, 3) float64
+        From :func:`triangle_cross`.
+
+    Returns
+    -------
+    (C,) bool
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    corners = v[cells]  # (C, 3, 3)
+    magnitude = np.abs(corners).max(axis=(1, 2))
+    edges = corners - np.roll(corners, -1, axis=1)
+    longest = np.sqrt((edges**2).sum(axis=2).max(axis=1))
+    bound = FLAT_ROUNDING_UNITS * np.finfo(np.float64).eps * magnitude * longest
+    return np.linalg.norm(cross, axis=1) <= bound
