@@ -19,8 +19,8 @@ def check_output(path: str | Path, force: bool = False) -> Path:
     Raises
     ------
     OutputError
-        The folder is missing or not writable, the path is a folder, or the file
-        exists and ``force`` is False.
+        The folder is missing or not writable, the path is a folder or a special
+        file (device, FIFO, socket), or the file exists and ``force`` is False.
     """
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
@@ -31,6 +31,13 @@ def check_output(path: str | Path, force: bool = False) -> Path:
     if not os.access(folder, os.W_OK | os.X_OK):
         raise OutputError(
             f"{path}: cannot write to the folder {folder} (permission denied); choose another -o"
+        )
+    if path.exists() and not path.is_file():
+        # A device, FIFO or socket: renaming a file over it would replace it
+        # (as root, /dev/null itself); isoconvert writes regular files only.
+        raise OutputError(
+            f"{path}: is not a regular file (a device, pipe or socket); "
+            "isoconvert writes regular files only, choose a file name"
         )
     if path.exists() and not force:
         raise OutputError(f"{path}: already exists; pass --force to overwrite it")
@@ -56,8 +63,8 @@ def atomic_output(path: str | Path, force: bool = False) -> Iterator[BinaryIO]:
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
-        if not force and path.exists():
-            raise OutputError(f"{path}: appeared while writing; pass --force to overwrite it")
+        if path.exists() and (not force or not path.is_file()):
+            raise OutputError(f"{path}: appeared while writing; choose another name or retry")
         os.replace(tmp, path)
     except OSError as exc:
         _remove(tmp)

@@ -36,7 +36,7 @@ def convert(
     flip: bool = False,
     ambiguity: str | None = None,
     axis: str | None = None,
-    vertex_offset: float = 0.0,
+    vertex_offset: float | None = None,
     nan_as: float | None = None,
     input_format: str | None = None,
     spacing: tuple[float, ...] | None = None,
@@ -54,14 +54,14 @@ def convert(
     ("reading", "extracting", "writing").
     """
     progress = on_progress or (lambda stage: None)
+    check_output(output, force)  # first: a folder given as -o is "a folder", not a format
     writer = output_format(output, format)
-    check_output(output, force)
     if Path(output).resolve() == Path(input).resolve():
         raise OutputError(f"{output}: is the input file; choose another output name")
     progress("reading")
     volume = read_volume(input, format=input_format, spacing=spacing, origin=origin, **read_options)
     options = {} if axis is None else {"axis": axis}
-    if vertex_offset:
+    if vertex_offset is not None:
         options["vertex_offset"] = vertex_offset
     progress("extracting")
     mesh = extract(
