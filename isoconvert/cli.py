@@ -44,6 +44,12 @@ Ambiguity = Enum("Ambiguity", {r.replace("-", "_"): r for r in SQUARE_AMBIGUITY_
 Axis = Enum("Axis", {"x": "x", "y": "y", "z": "z"}, type=str)
 Endian = Enum("Endian", {"little": "little", "big": "big"}, type=str)
 
+
+def _flag(*declarations: str, **kwargs):
+    """An on/off option, shown in help as a flag (typer would show ``--force <bool>``)."""
+    return typer.Option(*declarations, metavar="", **kwargs)
+
+
 #: Exit code when a check named by --require fails.
 EXIT_CHECK_FAILED = 4
 
@@ -55,7 +61,7 @@ RequireOpt = Annotated[
     ),
 ]
 VerboseOpt = Annotated[
-    bool, typer.Option("--verbose", "-v", help="Say what happens, step by step, with times.")
+    bool, _flag("--verbose", "-v", help="Say what happens, step by step, with times.")
 ]
 ExamplesOpt = Annotated[
     int, typer.Option(help="Examples to list per kind of problem.", rich_help_panel="Checks")
@@ -92,6 +98,14 @@ SpacingOpt = Annotated[
     str | None,
     typer.Option(help="Override the spacing: x y [z].", rich_help_panel="Input"),
 ]
+AllowOutsideOpt = Annotated[
+    bool,
+    _flag(
+        "--allow-outside-data",
+        help="Let a header (detached NRRD) name data files outside its own folder.",
+        rich_help_panel="Input",
+    ),
+]
 OriginOpt = Annotated[
     str | None,
     typer.Option(help="Override the origin: x y [z].", rich_help_panel="Input"),
@@ -103,27 +117,55 @@ def _interactive() -> bool:
     return sys.stderr.isatty()
 
 
+#: Shown while numba compiles a kernel (first run, per method and sample type).
+COMPILE_HINT = "about 10-25 s, once per method and sample type; `isoconvert warmup` does it ahead"
+
+
 @contextmanager
 def _stage_display(quiet: bool, verbose: bool = False):
-    """A spinner naming the stage (reading, extracting, writing) on a terminal;
-    with ``verbose``, a timed line per stage instead (also when not a terminal)."""
-    if verbose and not quiet:
-        start = time.perf_counter()
-        yield lambda stage: print(f"{time.perf_counter() - start:7.2f} s  {stage}", file=sys.stderr)
+    """Yield ``(on_progress, on_status)`` for :func:`isoconvert.convert`.
+
+    On a terminal a spinner names the stage (reading, extracting, writing) and,
+    while numba compiles, why it waits; notices print above it. With
+    ``verbose``, a timed line per stage instead (also when not a terminal).
+    Otherwise notices are plain lines on stderr.
+    """
+    if quiet:
+        yield None, None
         return
-    if quiet or not _interactive():
-        yield None
+    if verbose or not _interactive():
+        start = time.perf_counter()
+
+        def stage_line(stage: str) -> None:
+            print(f"{time.perf_counter() - start:7.2f} s  {stage}", file=sys.stderr)
+
+        yield (stage_line if verbose else None), _status(quiet)
         return
     from rich.console import Console
 
-    with Console(stderr=True).status("starting") as status:
-        yield lambda stage: status.update(f"{stage}...")
+    console = Console(stderr=True)
+    with console.status("starting") as status:
+
+        def on_status(message: str) -> None:
+            if message.startswith("compiling"):
+                status.update(f"{message} ({COMPILE_HINT})...")
+            else:
+                console.print(message, markup=False, highlight=False)
+
+        yield (lambda stage: status.update(f"{stage}...")), on_status
 
 
 def _status(quiet: bool):
+    """Notices as plain lines on stderr (None when quiet)."""
     if quiet:
         return None
-    return lambda message: print(message, file=sys.stderr, flush=True)
+
+    def say(message: str) -> None:
+        if message.startswith("compiling"):
+            message = f"{message} ({COMPILE_HINT})"
+        print(message, file=sys.stderr, flush=True)
+
+    return say
 
 
 def _numbers(text: str | None, name: str, kind=float) -> tuple | None:
@@ -136,7 +178,26 @@ def _numbers(text: str | None, name: str, kind=float) -> tuple | None:
         raise VolumeError(f"{name} takes numbers, e.g. {name} 1 1 2.5; got {text!r}") from None
 
 
-def _read_kwargs(input_format, shape, dtype, endian, header_bytes, channel, spacing, origin):
+def _vertex_offset(no_degenerate: bool, exact: bool) -> float | None:
+    """--no-degenerate always offsets, --exact-placement never; neither: automatic (None)."""
+    if no_degenerate and exact:
+        raise typer.BadParameter("--no-degenerate and --exact-placement contradict each other")
+    if no_degenerate:
+        return NO_DEGENERATE_OFFSET
+    return 0.0 if exact else None
+
+
+def _read_kwargs(
+    input_format,
+    shape,
+    dtype,
+    endian,
+    header_bytes,
+    channel,
+    spacing,
+    origin,
+    allow_outside_data=False,
+):
     kwargs = {
         "input_format": input_format,
         "spacing": _numbers(spacing, "--spacing"),
@@ -148,6 +209,7 @@ def _read_kwargs(input_format, shape, dtype, endian, header_bytes, channel, spac
         "endian": endian.value if isinstance(endian, Enum) else endian,
         "header_bytes": header_bytes,
         "channel": channel,
+        "allow_outside_data": allow_outside_data or None,
     }
     kwargs.update({k: v for k, v in opts.items() if v is not None})
     return kwargs
@@ -155,9 +217,9 @@ def _read_kwargs(input_format, shape, dtype, endian, header_bytes, channel, spac
 
 @app.callback(invoke_without_command=True)
 def _main(
-    version: Annotated[bool, typer.Option("--version", help="Show the version.")] = False,
+    version: Annotated[bool, _flag("--version", help="Show the version.")] = False,
     debug: Annotated[
-        bool, typer.Option("--debug", help="Show tracebacks (may go anywhere on the line).")
+        bool, _flag("--debug", help="Show tracebacks (may go anywhere on the line).")
     ] = False,
 ) -> None:
     if version:
@@ -189,10 +251,10 @@ def convert(
             help=f"Output format: {', '.join(WRITERS.names())} (default: from the extension)."
         ),
     ] = None,
-    ascii: Annotated[bool, typer.Option("--ascii", help="Text PLY/STL instead of binary.")] = False,
-    force: Annotated[bool, typer.Option("--force", "-f", help="Overwrite the output.")] = False,
+    ascii: Annotated[bool, _flag("--ascii", help="Text PLY/STL instead of binary.")] = False,
+    force: Annotated[bool, _flag("--force", "-f", help="Overwrite the output.")] = False,
     flip: Annotated[
-        bool, typer.Option("--flip", help="Reverse orientation (normals toward higher values).")
+        bool, _flag("--flip", help="Reverse orientation (normals toward higher values).")
     ] = False,
     ambiguity: Annotated[
         Ambiguity | None,
@@ -206,10 +268,18 @@ def convert(
     ] = None,
     no_degenerate: Annotated[
         bool,
-        typer.Option(
+        _flag(
             "--no-degenerate",
-            help=f"Keep vertices {NO_DEGENERATE_OFFSET:g} of an edge away from grid vertices: "
-            "no zero-length edges when the level equals sample values.",
+            help=f"Keep every vertex {NO_DEGENERATE_OFFSET:g} of an edge away from grid "
+            "vertices (the default only when the level equals some sample values).",
+        ),
+    ] = False,
+    exact_placement: Annotated[
+        bool,
+        _flag(
+            "--exact-placement",
+            help="Place vertices exactly by linear interpolation even when the level equals "
+            "sample values (zero-length edges and degenerate triangles there).",
         ),
     ] = False,
     report: Annotated[
@@ -221,7 +291,7 @@ def convert(
     ] = None,
     require: RequireOpt = None,
     examples: ExamplesOpt = 5,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only errors.")] = False,
+    quiet: Annotated[bool, _flag("--quiet", "-q", help="Print only errors.")] = False,
     verbose: VerboseOpt = False,
     input_format: InputFormatOpt = None,
     shape: ShapeOpt = None,
@@ -231,6 +301,7 @@ def convert(
     channel: ChannelOpt = None,
     spacing: SpacingOpt = None,
     origin: OriginOpt = None,
+    allow_outside_data: AllowOutsideOpt = False,
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
     from .report import parse_requirements
@@ -239,7 +310,7 @@ def convert(
     from .convert import convert as run_convert
 
     start = time.perf_counter()
-    with _stage_display(quiet, verbose) as on_progress:
+    with _stage_display(quiet, verbose) as (on_progress, on_status):
         result = run_convert(
             input,
             output,
@@ -251,12 +322,20 @@ def convert(
             flip=flip,
             ambiguity=ambiguity.value if ambiguity else None,
             axis=axis.value if axis else None,
-            vertex_offset=NO_DEGENERATE_OFFSET if no_degenerate else 0.0,
+            vertex_offset=_vertex_offset(no_degenerate, exact_placement),
             nan_as=nan_as,
-            on_status=_status(quiet),
+            on_status=on_status,
             on_progress=on_progress,
             **_read_kwargs(
-                input_format, shape, dtype, endian, header_bytes, channel, spacing, origin
+                input_format,
+                shape,
+                dtype,
+                endian,
+                header_bytes,
+                channel,
+                spacing,
+                origin,
+                allow_outside_data,
             ),
         )
     if not quiet:
@@ -280,16 +359,14 @@ def convert(
 def check(
     mesh_file: Annotated[Path, typer.Argument(help="OBJ, PLY or STL file to check.")],
     require: RequireOpt = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    as_json: Annotated[bool, _flag("--json", help="Print JSON instead of a table.")] = False,
     report: Annotated[
         str | None,
         typer.Option(help="Also write the report as JSON to FILE.json.", rich_help_panel="Checks"),
     ] = None,
     examples: ExamplesOpt = 5,
-    force: Annotated[
-        bool, typer.Option("--force", "-f", help="Overwrite the report file.")
-    ] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only errors.")] = False,
+    force: Annotated[bool, _flag("--force", "-f", help="Overwrite the report file.")] = False,
+    quiet: Annotated[bool, _flag("--quiet", "-q", help="Print only errors.")] = False,
 ) -> None:
     """Report on a mesh file: degenerate elements, holes, manifoldness, orientation, topology."""
     from .meshfile import read_mesh
@@ -330,17 +407,18 @@ def batch(
         Path | None,
         typer.Option(help="TOML or CSV mapping of path patterns to level and read options."),
     ] = None,
-    recursive: Annotated[
-        bool, typer.Option("--recursive", "-r", help="Search sub-folders.")
-    ] = False,
+    recursive: Annotated[bool, _flag("--recursive", "-r", help="Search sub-folders.")] = False,
     format: Annotated[
         str, typer.Option(help=f"Output format: {', '.join(WRITERS.names())}.")
     ] = "ply",
     method: Annotated[str | None, typer.Option(help="Extraction method (as convert).")] = None,
-    ascii: Annotated[bool, typer.Option("--ascii", help="Text PLY/STL.")] = False,
-    flip: Annotated[bool, typer.Option("--flip", help="Reverse orientation.")] = False,
+    ascii: Annotated[bool, _flag("--ascii", help="Text PLY/STL.")] = False,
+    flip: Annotated[bool, _flag("--flip", help="Reverse orientation.")] = False,
     no_degenerate: Annotated[
-        bool, typer.Option("--no-degenerate", help="As convert: no zero-length edges.")
+        bool, _flag("--no-degenerate", help="As convert: always keep vertices off samples.")
+    ] = False,
+    exact_placement: Annotated[
+        bool, _flag("--exact-placement", help="As convert: never move vertices off samples.")
     ] = False,
     jobs: Annotated[
         int | None, typer.Option("--jobs", "-j", help="Worker processes (default: cores).")
@@ -353,16 +431,14 @@ def batch(
         ),
     ] = None,
     skip_existing: Annotated[
-        bool, typer.Option("--skip-existing", help="Keep outputs that exist; convert the rest.")
+        bool, _flag("--skip-existing", help="Keep outputs that exist; convert the rest.")
     ] = False,
-    force: Annotated[
-        bool, typer.Option("--force", "-f", help="Overwrite existing outputs.")
-    ] = False,
+    force: Annotated[bool, _flag("--force", "-f", help="Overwrite existing outputs.")] = False,
     summary: Annotated[
         Path | None, typer.Option(help="Write a summary table as FILE.json or FILE.csv.")
     ] = None,
     require: RequireOpt = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print only errors.")] = False,
+    quiet: Annotated[bool, _flag("--quiet", "-q", help="Print only errors.")] = False,
     verbose: VerboseOpt = False,
     shape: ShapeOpt = None,
     dtype: DtypeOpt = None,
@@ -414,7 +490,7 @@ def batch(
         "ascii": ascii,
         "flip": flip,
         "method": method,
-        "vertex_offset": NO_DEGENERATE_OFFSET if no_degenerate else 0.0,
+        "vertex_offset": _vertex_offset(no_degenerate, exact_placement),
         "require": required,
     }
     if work:
@@ -573,7 +649,7 @@ def _print_batch_table(outcomes) -> None:
 @app.command()
 def info(
     input: Annotated[str, typer.Argument(help="Volume file, folder of TIFF slices, or glob.")],
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of text.")] = False,
+    as_json: Annotated[bool, _flag("--json", help="Print JSON instead of text.")] = False,
     input_format: InputFormatOpt = None,
     shape: ShapeOpt = None,
     dtype: DtypeOpt = None,
@@ -652,6 +728,42 @@ def _text_histogram(hist, rows: int = 12, width: int = 40) -> list[str]:
         f"{bounds[r]:>10.4g} .. {bounds[r + 1]:<10.4g} {bars[r]:<{width}} {int(counts[r]):,}"
         for r in range(rows)
     ]
+
+
+@app.command()
+def warmup(
+    methods: Annotated[
+        str,
+        typer.Option(help="Comma-separated methods to compile: cubes, tetra, squares, or all."),
+    ] = "cubes",
+    dtypes: Annotated[
+        str,
+        typer.Option(
+            help="Comma-separated sample types (uint8, int16, uint16, float32, ...), or all."
+        ),
+    ] = "uint8,int16,uint16,float32",
+    quiet: Annotated[bool, _flag("--quiet", "-q", help="Print only errors.")] = False,
+) -> None:
+    """Compile the extraction kernels ahead of time (batch jobs and CI then start at once)."""
+    from .extract.kernels import cache_folder
+    from .extract.warmup import COMPILED_METHODS
+    from .extract.warmup import warmup as run_warmup
+    from .volume import SUPPORTED_DTYPES
+
+    chosen_methods = _choices(methods, COMPILED_METHODS)
+    chosen_dtypes = _choices(dtypes, SUPPORTED_DTYPES)
+    with _stage_display(quiet) as (_, on_status):
+        done = run_warmup(chosen_methods, chosen_dtypes, on_status=on_status)
+    if not quiet:
+        for item in done:
+            how = "compiled" if item.compiled else "already cached"
+            print(f"{item.method:<8} {item.dtype:<8} {how} ({item.seconds:.1f} s)")
+        print(f"cache: {cache_folder()}")
+
+
+def _choices(text: str, known: tuple[str, ...]) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    return list(known) if names == ["all"] else names
 
 
 @app.command()

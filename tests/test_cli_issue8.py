@@ -1,0 +1,159 @@
+"""What a new user hit (issue 8), through the command line: special output
+files, output folders, --nan-as, integer levels, flags in help, warmup."""
+
+from __future__ import annotations
+
+import os
+import stat
+
+import numpy as np
+import pytest
+from conftest import SAMPLES
+from test_cli import assert_one_line_error, run
+
+from isoconvert.cli import main
+
+SPHERE = str(SAMPLES / "sphere.nrrd")
+
+
+def test_output_onto_a_fifo_is_refused_and_the_fifo_stays(tmp_path, capsys):
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    code, _, err = run(
+        capsys, "convert", SPHERE, "-l", "127.5", "-o", fifo, "--format", "ply", "--force"
+    )
+    assert_one_line_error(code, err, "not a regular file")
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+
+
+def test_output_onto_dev_null_is_refused(capsys):
+    before = os.stat("/dev/null")
+    code, _, err = run(
+        capsys, "convert", SPHERE, "-l", "127.5", "-o", "/dev/null", "--format", "ply", "--force"
+    )
+    assert_one_line_error(code, err, "/dev/null", "not a regular file")
+    after = os.stat("/dev/null")
+    assert stat.S_ISCHR(after.st_mode) and after.st_ino == before.st_ino
+
+
+def test_report_onto_a_fifo_is_refused(tmp_path, capsys):
+    fifo = tmp_path / "report.json"
+    os.mkfifo(fifo)
+    out = tmp_path / "s.ply"
+    code, _, err = run(
+        capsys, "convert", SPHERE, "-l", "127.5", "-o", out, "--report", fifo, "--force"
+    )
+    assert code == 1 and "not a regular file" in err
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+
+
+def test_output_folder_is_called_a_folder(tmp_path, capsys):
+    code, _, err = run(capsys, "convert", SPHERE, "-l", "127.5", "-o", tmp_path)
+    assert_one_line_error(code, err, "is a folder")
+    assert "extension" not in err
+
+
+@pytest.mark.parametrize("value", ["nan", "-inf", "inf"])
+def test_nan_as_takes_a_finite_number(tmp_path, capsys, value):
+    raw = tmp_path / "nan_4x4x4_float32.raw"
+    data = np.zeros((4, 4, 4), np.float32)
+    data[1:3, 1:3, 1:3] = 2
+    data[0, 0, 0] = np.nan
+    data.tofile(raw)
+    out = tmp_path / "o.ply"
+    code, _, err = run(capsys, "convert", raw, "-l", "1", "-o", out, "--nan-as", value)
+    assert_one_line_error(code, err, "--nan-as takes a finite number")
+    assert not out.exists()
+
+
+def test_integer_level_says_how_many_samples_equal_it(tmp_path, capsys):
+    out = tmp_path / "s.ply"
+    code, _, err = run(capsys, "convert", SPHERE, "-l", "128", "-o", out, "--report", "-q")
+    assert code == 0
+    code, stdout, err = run(capsys, "convert", SPHERE, "-l", "128", "-o", out, "--force")
+    assert code == 0
+    from isoconvert import read_volume
+
+    equal = int(np.count_nonzero(read_volume(SPHERE).data == 128))
+    assert equal > 0
+    assert f"level 128 equals {equal:,} samples" in err
+    code, _, err = run(
+        capsys, "convert", SPHERE, "-l", "128", "-o", out, "--force", "--exact-placement"
+    )
+    assert code == 0
+    assert "--level 127.5" in err
+
+
+def test_exact_placement_and_no_degenerate_contradict(tmp_path, capsys):
+    code = main(
+        [
+            "convert",
+            SPHERE,
+            "-l",
+            "128",
+            "-o",
+            str(tmp_path / "s.ply"),
+            "--exact-placement",
+            "--no-degenerate",
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and "contradict" in err
+
+
+def test_integer_level_report_is_clean_by_default(tmp_path, capsys):
+    out = tmp_path / "s.ply"
+    code, _, err = run(
+        capsys,
+        "convert",
+        SPHERE,
+        "-l",
+        "128",
+        "-o",
+        out,
+        "--require",
+        "watertight,manifold,no-zero-length,no-degenerate",
+    )
+    assert code == 0, err
+    code, _, err = run(
+        capsys,
+        "convert",
+        SPHERE,
+        "-l",
+        "128",
+        "-o",
+        out,
+        "--force",
+        "--exact-placement",
+        "--require",
+        "no-zero-length",
+    )
+    assert code == 4
+
+
+@pytest.mark.parametrize("command", ["convert", "check", "batch", "info", "warmup"])
+def test_help_shows_flags_as_flags(capsys, command, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "200")
+    code = main([command, "--help"])
+    out = capsys.readouterr().out
+    assert code == 0
+    flags = ("--quiet", "--force", "--json", "--ascii")
+    flag_lines = [line for line in out.splitlines() if any(f in line for f in flags)]
+    assert flag_lines
+    assert not any("<bool>" in line for line in flag_lines), flag_lines
+
+
+def test_warmup_compiles_then_finds_the_cache(capsys):
+    code = main(["warmup", "--methods", "squares", "--dtypes", "uint8"])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "squares" in out and "uint8" in out and "cache:" in out
+    code = main(["warmup", "--methods", "squares", "--dtypes", "uint8"])
+    out = capsys.readouterr().out
+    assert "already cached" in out
+
+
+def test_warmup_refuses_unknown_names(capsys):
+    code = main(["warmup", "--dtypes", "float16"])
+    err = capsys.readouterr().err
+    assert code == 1 and "float16" in err
