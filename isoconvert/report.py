@@ -8,6 +8,42 @@ all sit on the grid vertex where two spheres touch (Wenger, section 1.3) merges
 into one non-manifold vertex, a vertex interpolated onto a grid vertex whose
 value equals the isovalue makes zero-length edges (sections 2.2.4, 2.3.4).
 
+Degenerate triangles
+--------------------
+A triangle is degenerate when it repeats a position (after merging: reason
+"repeated vertex") or when it is flat: three distinct positions but zero area
+within the rounding error of its coordinates (reason "zero area", decided by
+:func:`isoconvert.geometry.flat_triangles`, so a sliver of area 1e-18 on a
+unit-size mesh counts, and the rule does not depend on the mesh's scale).
+
+- A flat triangle is still a 2-cell: its three edges and vertices take full
+  part in the edge, boundary, manifold, orientation, duplicate, component and
+  Euler analysis (an isolated flat triangle has three boundary edges and is a
+  component of Euler characteristic 1).
+- A triangle with a repeated position is not a 2-cell (it is a segment or a
+  point): its edges are not counted, it is in no component and adds nothing to
+  the Euler characteristic, but its vertices count as referenced (they are not
+  ``unreferenced_vertices``).
+
+Segments follow the same rule: a segment whose two ends are at one position is
+not counted as an edge of a polyline, but its vertices are referenced.
+
+Cell indices are checked first: an index outside ``0..V-1`` is a
+:class:`~isoconvert.errors.FormatError` naming the first cell that has one.
+
+The frame of boundaries
+-----------------------
+Open boundaries (edges in one triangle, ends of open polylines) are holes
+unless they lie on a face of the domain: the grid the mesh was extracted from
+when it is known (``mesh.info["grid"]``, or the ``grid`` argument of
+:func:`check_mesh`, see :func:`grid_from_volume`), else the mesh's bounding box,
+which the report then says in ``notes``. Points count as on a grid face within
+1e-6 index units plus the rounding error of the stored coordinates, which is
+that of float32 when ``mesh.info["stored_precision"]`` is ``"float32"`` (or,
+when the precision is not stated, when every coordinate is a float32 value):
+``4 * 2**-24 * (|p| @ |A^-1|.T)`` index units per axis for a point ``p`` and
+the grid's index-to-world matrix ``A``.
+
 Everything is vectorized numpy; no numba, so ``isoconvert check`` starts fast.
 """
 
@@ -15,11 +51,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .errors import FormatError, IsoconvertError
+from .geometry import FLAT_ROUNDING_UNITS, flat_triangles, triangle_cross
 from .graph import connected_components, group_sizes, row_groups
 from .mesh import Mesh
+
+if TYPE_CHECKING:
+    from .volume import Volume
 
 SCHEMA_VERSION = 1
 #: The JSON schema of :meth:`Report.to_dict`, shipped with the package.
@@ -105,8 +147,6 @@ class Report:
 
 def parse_requirements(text: str | None) -> list[str]:
     """``"watertight,manifold"`` -> names; the error lists the known names."""
-    from .errors import IsoconvertError
-
     if not text:
         return []
     names = [n.strip() for n in text.split(",") if n.strip()]
@@ -121,22 +161,78 @@ def parse_requirements(text: str | None) -> list[str]:
 
 # --- the boundary of the domain ------------------------------------------------------
 
+#: Unit roundoff (half an ulp, relative) of each stored precision.
+_UNIT_ROUNDOFF = {"float32": 2.0**-24, "float64": 2.0**-53}
+#: Index units within which a point counts as on a grid face, besides rounding.
+_GRID_TOLERANCE = 1e-6
+
+#: ``Report.notes`` entry when boundaries had to be judged against the bounding box.
+BOUNDING_BOX_NOTE = (
+    "boundaries judged against the bounding box: no grid is recorded with the mesh; "
+    "pass --grid VOLUME to judge them against the volume's grid"
+)
+
+
+def grid_from_volume(volume: Volume) -> dict:
+    """The grid of a volume, as extracted meshes record it in ``info["grid"]``.
+
+    Pass it as ``check_mesh(mesh, grid=...)`` to judge a mesh file's boundaries
+    against the volume it was extracted from (``isoconvert check --grid VOLUME``).
+
+    Parameters
+    ----------
+    volume : Volume
+        Only its shape and placement are used (no samples are read).
+
+    Returns
+    -------
+    dict
+        ``shape`` (ndim,) list of int, ``origin`` (ndim,) list of float and
+        ``affine`` (ndim, ndim) nested list of float (index offsets to world
+        offsets, :attr:`Volume.affine`): plain lists, ready for JSON or a
+        file header.
+    """
+    return {
+        "shape": [int(n) for n in volume.shape],
+        "origin": np.asarray(volume.origin, dtype=np.float64).tolist(),
+        "affine": np.asarray(volume.affine, dtype=np.float64).tolist(),
+    }
+
+
+def _stored_precision(info: dict, vertices: np.ndarray) -> str:
+    """The stored precision, "float32" or "float64": as ``info`` states, else
+    float32 when every finite coordinate is a float32 value (as STL's, or an
+    older PLY's)."""
+    stated = info.get("stored_precision")
+    if stated in _UNIT_ROUNDOFF:
+        return stated
+    with np.errstate(over="ignore", invalid="ignore"):
+        as32 = vertices.astype(np.float32)
+    exact = (as32 == vertices) | ~np.isfinite(vertices)
+    return "float32" if len(vertices) and exact.all() else "float64"
+
 
 class _Frame:
-    """Tells whether points lie on a face of the grid (or of the bounding box)."""
+    """Tells whether points lie on a face of the grid (or of the bounding box).
 
-    def __init__(self, mesh: Mesh, vertices: np.ndarray) -> None:
-        grid = mesh.info.get("grid")
+    ``used`` becomes True once a non-empty set of points has been judged.
+    """
+
+    def __init__(self, vertices: np.ndarray, grid: dict | None, info: dict, source: str) -> None:
+        self._vertices = vertices
+        self._info = info
+        self._roundoff: float | None = None
+        self.used = False
         if grid is not None:
-            shape = np.asarray(grid["shape"], dtype=np.float64)
+            shape, origin, affine = _parse_grid(grid, source)
             nd = len(shape)
             self.name = "grid"
-            self._origin = np.asarray(grid["origin"], dtype=np.float64)
-            self._inverse = np.linalg.inv(np.asarray(grid["affine"], dtype=np.float64))
+            self._origin = origin
+            self._inverse = np.linalg.inv(affine)
+            self._abs_inverse = np.abs(self._inverse)
             self._lo = np.zeros(nd)
-            self._hi = shape - 1
+            self._hi = shape - 1.0
             self._nd = nd
-            self._tol = 1e-6
         else:
             self.name = "bounding box"
             self._origin = None
@@ -144,20 +240,76 @@ class _Frame:
             finite = vertices[np.isfinite(vertices).all(axis=1)]
             self._lo = finite.min(axis=0) if len(finite) else np.zeros(3)
             self._hi = finite.max(axis=0) if len(finite) else np.zeros(3)
-            self._tol = 1e-9 * max(float(np.max(self._hi - self._lo)), 1e-300)
+            extent = float(np.max(self._hi - self._lo))
+            self._magnitude = float(np.abs(finite).max()) if len(finite) else 0.0
+            self._base = 1e-9 * max(extent, 1e-300)
+
+    def roundoff(self) -> float:
+        """Unit roundoff of the stored coordinates (decided on first use)."""
+        if self._roundoff is None:
+            precision = _stored_precision(self._info, self._vertices)
+            self._roundoff = _UNIT_ROUNDOFF[precision]
+        return self._roundoff
 
     def faces(self, points: np.ndarray) -> np.ndarray:
-        """(N, 2 * nd) bool: point on the low / high face of each axis."""
+        """(N, 2 * nd) bool: point on the low / high face of each axis.
+
+        Parameters
+        ----------
+        points : (N, 3) float64
+        """
+        if len(points):
+            self.used = True
         p = points[:, : self._nd]
+        # stored coordinates are off by up to roundoff * |p|; with float64
+        # arithmetic on top, 4 units of it bound the error comfortably
+        slack = 4.0 * self.roundoff()
         if self._origin is not None:
+            tol = _GRID_TOLERANCE + slack * (np.abs(p) @ self._abs_inverse.T)
             p = (p - self._origin) @ self._inverse.T
-        low = np.abs(p - self._lo) <= self._tol
-        high = np.abs(p - self._hi) <= self._tol
+        else:
+            tol = max(self._base, slack * self._magnitude)
+        low = np.abs(p - self._lo) <= tol
+        high = np.abs(p - self._hi) <= tol
         return np.concatenate([low, high], axis=1)
 
     def same_face(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """(N,) bool: segment a-b lies in one face of the domain."""
+        """(N,) bool: segment a-b lies in one face of the domain.
+
+        Parameters
+        ----------
+        a, b : (N, 3) float64
+        """
         return (self.faces(a) & self.faces(b)).any(axis=1)
+
+
+def _parse_grid(grid: dict, source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Shape (nd,), origin (nd,) and invertible affine (nd, nd) of a grid dict."""
+    try:
+        shape = np.asarray(grid["shape"], dtype=np.float64)
+        origin = np.asarray(grid["origin"], dtype=np.float64)
+        affine = np.asarray(grid["affine"], dtype=np.float64)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise FormatError(
+            f"{source}: the grid needs shape, origin and affine as numbers ({exc!s})"
+        ) from None
+    nd = shape.size
+    if (
+        shape.shape != (nd,)
+        or nd not in (2, 3)
+        or origin.shape != (nd,)
+        or affine.shape != (nd, nd)
+        or not (np.isfinite(origin).all() and np.isfinite(affine).all())
+        or not (shape >= 1).all()
+    ):
+        raise FormatError(
+            f"{source}: the grid's shape {shape.tolist()}, origin {origin.tolist()} and "
+            f"affine {affine.tolist()} do not fit together (expected 2 or 3 sizes, as many "
+            "origin coordinates and a square matrix of that size)"
+        )
+    if abs(np.linalg.det(affine)) <= 1e-12 * max(float(np.abs(affine).max()), 1e-300) ** nd:
+        raise FormatError(f"{source}: the grid's affine {affine.tolist()} is singular")
+    return shape, origin, affine
 
 
 # --- helpers -----------------------------------------------------------------------------
@@ -200,25 +352,41 @@ def _pos(p) -> list[float]:
 # --- triangles ---------------------------------------------------------------------------
 
 
-def check_mesh(mesh: Mesh, *, examples: int = 5, source: str = "") -> Report:
+def check_mesh(
+    mesh: Mesh, *, examples: int = 5, source: str = "", grid: dict | None = None
+) -> Report:
     """Check a triangle mesh or a set of contour segments.
 
     Parameters
     ----------
     mesh : Mesh
-        ``vertices (V, 3)``, ``cells (C, 3)`` or ``(C, 2)``. When
-        ``mesh.info["grid"]`` describes the volume it came from (extracted
-        meshes carry it), boundaries are judged against that grid; otherwise
-        against the mesh's bounding box.
+        ``vertices (V, 3)``, ``cells (C, 3)`` or ``(C, 2)`` with indices in
+        ``0..V-1``. ``mesh.info["grid"]`` (extracted meshes carry it, files
+        written by isoconvert record it) tells the grid boundaries are judged
+        against; ``mesh.info["stored_precision"]`` ("float32" or "float64")
+        how precisely the positions were stored.
     examples : int
         How many examples to give per kind of problem.
     source : str
-        Name for the report.
+        Name for the report and for errors; default ``mesh.info["source"]``.
+    grid : dict or None
+        ``{"shape", "origin", "affine"}`` as :func:`grid_from_volume` makes it:
+        judge boundaries against this grid instead of ``mesh.info["grid"]``.
+        With neither, boundaries are judged against the mesh's bounding box
+        and, when there are any, ``notes`` says so.
 
     Returns
     -------
     Report
+
+    Raises
+    ------
+    FormatError
+        A cell refers to a vertex index outside ``0..V-1``, or the grid is malformed.
+    IsoconvertError
+        The arrays do not have the shapes above.
     """
+    name = source or str(mesh.info.get("source", "")) or "mesh"
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     cells = np.asarray(mesh.cells, dtype=np.int64)
     if (
@@ -227,13 +395,12 @@ def check_mesh(mesh: Mesh, *, examples: int = 5, source: str = "") -> Report:
         or cells.ndim != 2
         or cells.shape[1] not in (2, 3)
     ):
-        from .errors import IsoconvertError
-
-        raise IsoconvertError(
-            f"{source or 'mesh'}: expected (V, 3) vertices and (C, 3) or (C, 2) cells"
-        )
+        raise IsoconvertError(f"{name}: expected (V, 3) vertices and (C, 3) or (C, 2) cells")
+    _check_indices(cells, len(vertices), name)
     finite = np.isfinite(vertices).all(axis=1)
-    frame = _Frame(mesh, vertices)
+    if grid is None:
+        grid = mesh.info.get("grid")
+    frame = _Frame(vertices, grid, mesh.info, name)
     if cells.shape[1] == 3:
         report = _check_triangles(vertices, cells, frame, examples)
     else:
@@ -244,8 +411,29 @@ def check_mesh(mesh: Mesh, *, examples: int = 5, source: str = "") -> Report:
         len(bad), [{"vertex": int(i)} for i in bad[:examples]]
     )
     if len(bad):
-        report.checks = {name: False for name in report.checks}
+        report.checks = {check: False for check in report.checks}
+    if frame.name == "bounding box" and frame.used:
+        report.notes.append(BOUNDING_BOX_NOTE)
     return report
+
+
+def _check_indices(cells: np.ndarray, n_vertices: int, name: str) -> None:
+    """Raise FormatError naming the first cell with an index outside ``0..V-1``."""
+    if cells.size == 0 or (cells.min() >= 0 and cells.max() < n_vertices):
+        return
+    bad = (cells < 0) | (cells >= n_vertices)
+    row = int(np.flatnonzero(bad.any(axis=1))[0])
+    index = int(cells[row][bad[row]][0])
+    kind = "triangle" if cells.shape[1] == 3 else "segment"
+    if index < 0:
+        why = "but vertex indices start at 0"
+    elif n_vertices == 0:
+        why = "but there are no vertices"
+    elif n_vertices == 1:
+        why = "but there is only 1 vertex"
+    else:
+        why = f"but there are only {n_vertices} vertices"
+    raise FormatError(f"{name}: {kind} {row} refers to vertex {index}, {why}")
 
 
 def _check_triangles(vertices, cells, frame, n_examples) -> Report:
@@ -270,26 +458,34 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
         ],
     )
 
-    # degenerate triangles: a repeated vertex (after merging), or zero area
+    # degenerate triangles: a repeated position (not a 2-cell), or flat (a 2-cell
+    # of zero area within rounding); see the module docstring
     repeated = (tris[:, 0] == tris[:, 1]) | (tris[:, 1] == tris[:, 2]) | (tris[:, 0] == tris[:, 2])
-    p0, p1, p2 = unique[tris[:, 0]], unique[tris[:, 1]], unique[tris[:, 2]]
-    cross = np.cross(p1 - p0, p2 - p0)
+    cross = triangle_cross(unique, tris)
     area2 = np.linalg.norm(cross, axis=1)
-    flat = ~repeated & (area2 == 0)
+    flat = _flat(unique, tris, cross, area2) & ~repeated
     degenerate = repeated | flat
     examples_deg = [
         {
             "triangle": int(t),
             "reason": "repeated vertex" if repeated[t] else "zero area",
-            "position": _pos(p0[t]),
+            "position": _pos(unique[tris[t, 0]]),
         }
         for t in np.flatnonzero(degenerate)[:n_examples]
     ]
     problems["degenerate_triangles"] = _problem(degenerate.sum(), examples_deg)
 
-    keep = np.flatnonzero(~degenerate)
-    tv = tris[keep]
     n_u = len(unique)
+    if repeated.any():
+        keep = np.flatnonzero(~repeated)  # the 2-cells
+        tv = tris[keep]
+        referenced = np.zeros(n_u, dtype=bool)
+        referenced[tris.reshape(-1)] = True
+        n_referenced = int(referenced.sum())
+    else:
+        keep = np.arange(n_tris)
+        tv = tris
+        n_referenced = -1  # every vertex a 2-cell uses: set below
 
     # edges of the kept triangles: occurrence o = 3 * i + j runs tv[i, j] -> tv[i, j + 1]
     a = tv.reshape(-1)
@@ -350,8 +546,10 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
         ],
     )
 
-    # components, Euler characteristic and genus
+    # components, Euler characteristic and genus, of the 2-cells
     used = np.flatnonzero(np.bincount(tv.reshape(-1), minlength=n_u))
+    if n_referenced < 0:
+        n_referenced = len(used)
     comp = connected_components(n_u, edge_lo, edge_hi)
     comp_of, n_comp = _renumber(comp, used)
     lookup = np.full(n_u, -1, dtype=np.int64)
@@ -380,18 +578,20 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
 
     watertight = len(tv) > 0 and len(boundary) == 0 and len(nonmanifold_edges) == 0
     oriented = not same_way.any()
-    area = 0.5 * float(area2[keep].sum())
+    # a repeated position makes the cross product exactly zero: summing over
+    # every triangle is summing over the 2-cells
+    area = 0.5 * float(area2.sum())
     measures = {"area": area}
     if watertight and oriented:
         # det[p0 - c, p1 - c, p2 - c] = (p0 - c) . ((p1 - p0) x (p2 - p0)); c near the
         # mesh keeps the sum well conditioned
         c = unique[used].mean(axis=0)
-        measures["volume"] = float(np.einsum("ij,ij->", p0[keep] - c, cross[keep]) / 6.0)
+        measures["volume"] = float(np.einsum("ij,ij->", unique[tris[:, 0]] - c, cross) / 6.0)
 
     counts = {
         "vertices": n_vertices,
         "merged_vertices": n_vertices - n_u,
-        "unreferenced_vertices": int(n_u - len(used)),
+        "unreferenced_vertices": int(n_u - n_referenced),
         "edges": int(n_edges),
         "triangles": n_tris,
     }
@@ -410,6 +610,32 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
         "per_component": components,
     }
     return Report("triangles", counts, checks, problems, topology, measures, frame.name)
+
+
+def _flat(unique: np.ndarray, tris: np.ndarray, cross: np.ndarray, area2: np.ndarray) -> np.ndarray:
+    """(C,) bool: :func:`~isoconvert.geometry.flat_triangles`, computed only where it can hold.
+
+    Its bound ``k * eps * m * l`` is at most ``k * eps * M * 2 * sqrt(3) * M`` for
+    ``M`` the largest finite coordinate (``m <= M``, and no edge is longer than
+    the cube ``[-M, M]^3``'s diagonal), so triangles with a larger cross
+    product are not flat and are skipped: usually nearly all of them.
+
+    Parameters
+    ----------
+    unique : (U, 3) float64
+    tris : (C, 3) int64
+    cross : (C, 3) float64
+    area2 : (C,) float64
+        Norms of ``cross``.
+    """
+    finite = np.isfinite(unique)
+    m = float(np.abs(unique[finite]).max()) if finite.any() else 0.0
+    bound = FLAT_ROUNDING_UNITS * np.finfo(np.float64).eps * m * (2.0 * np.sqrt(3.0) * m)
+    candidates = np.flatnonzero(area2 <= bound * (1.0 + 1e-9))
+    flat = np.zeros(len(tris), dtype=bool)
+    if len(candidates):
+        flat[candidates] = flat_triangles(unique, tris[candidates], cross[candidates])
+    return flat
 
 
 def _duplicate_triangles(tv, o1, o2, edge_manifold) -> list[list[int]]:
@@ -559,7 +785,8 @@ def _check_segments(vertices, cells, frame, n_examples) -> Report:
     counts = {
         "vertices": len(vertices),
         "merged_vertices": len(vertices) - n_u,
-        "unreferenced_vertices": int(n_u - len(used)),
+        # a segment with both ends at one position is no edge, but uses its vertices
+        "unreferenced_vertices": int(n_u - len(np.unique(segs))),
         "segments": len(cells),
     }
     checks = {
@@ -586,7 +813,8 @@ def _check_segments(vertices, cells, frame, n_examples) -> Report:
 
 
 def format_report(report: Report) -> str:
-    """A compact table with PASS / FAIL marks, then the first examples of each problem."""
+    """A compact table with PASS / FAIL marks, the first examples of each problem,
+    then the notes (among them why boundaries were judged against the bounding box)."""
     c = report.counts
     lines = [f"{report.source or 'mesh'}: {report.kind}"]
     if report.kind == "triangles":
@@ -627,7 +855,10 @@ def format_report(report: Report) -> str:
         lines.append(f"  {name.replace('_', ' ')}: {p['count']:,}")
         for ex in p["examples"]:
             lines.append("    " + ", ".join(f"{k} {_short(v)}" for k, v in ex.items()))
-    lines.append(f"  (boundaries judged against the {report.boundary_frame})")
+    for note in report.notes:
+        lines.append(f"  note: {note}")
+    if BOUNDING_BOX_NOTE not in report.notes:
+        lines.append(f"  (boundaries judged against the {report.boundary_frame})")
     return "\n".join(lines)
 
 

@@ -49,7 +49,8 @@ def test_torus_genus_one():
 
 
 def test_two_spheres_touching_point_is_the_one_non_manifold_vertex():
-    mesh = extract(read_volume(SAMPLES / "two_spheres.nrrd"), 0.0)
+    # exact placement: the level equals samples there, which is the point of the test
+    mesh = extract(read_volume(SAMPLES / "two_spheres.nrrd"), 0.0, vertex_offset=0)
     r = validated(check_mesh(mesh))
     bad = r.problems["non_manifold_vertices"]
     assert bad["count"] == 1
@@ -111,7 +112,7 @@ def collapsed_grid_vertex(data, level, edge_ids):
 )
 def test_zero_length_edges_match_an_independent_count(data, level):
     assume(data.min() < level <= data.max())
-    mesh = extract(Volume(data), level)
+    mesh = extract(Volume(data), level, vertex_offset=0)
     at = collapsed_grid_vertex(data, level, mesh.edge_ids)
     edges, _ = edge_use(mesh.cells)
     expected = int(((at[edges[:, 0]] >= 0) & (at[edges[:, 0]] == at[edges[:, 1]])).sum())
@@ -134,7 +135,7 @@ def test_degenerate_free_option_keeps_surfaces_closed(data, level, method):
     assert r.problems["zero_length_edges"]["count"] == 0
     assert r.checks["watertight"] and r.checks["oriented"] and r.checks["no-holes"]
     # the offset moves no vertex by more than a thousandth of an edge
-    plain = extract(Volume(data), level, method=method)
+    plain = extract(Volume(data), level, method=method, vertex_offset=0)
     assert np.abs(plain.vertices - mesh.vertices).max() <= 1e-3 * np.sqrt(3) + 1e-12
     assert np.array_equal(plain.cells, mesh.cells)
 
@@ -154,9 +155,11 @@ def analysis_arrays(mesh):
     [
         lambda: extract(Volume(ball(24, 8.0)), 0.0),
         lambda: extract(Volume(load_samples_module().torus()), 3.0),
-        lambda: extract(read_volume(SAMPLES / "two_spheres.nrrd"), 0.0),
+        lambda: extract(read_volume(SAMPLES / "two_spheres.nrrd"), 0.0, vertex_offset=0),
         lambda: extract(Volume(ball(20, 12.0, center=(2.0, 3.0, 1.0))), 0.0),
-        lambda: extract(Volume(np.random.default_rng(5).integers(0, 5, (9, 8, 7))), 2),
+        lambda: extract(
+            Volume(np.random.default_rng(5).integers(0, 5, (9, 8, 7))), 2, vertex_offset=0
+        ),
         lambda: extract(
             Volume(np.random.default_rng(6).integers(0, 5, (9, 8, 7))), 2.5, method="tetra"
         ),
@@ -294,6 +297,7 @@ def test_require_manifold_and_no_holes_on_extracted_meshes(tmp_path, capsys):
             str(out),
             "--require",
             "manifold",
+            "--exact-placement",
             "-q",
         ]
     )
