@@ -367,13 +367,46 @@ def check(
     examples: ExamplesOpt = 5,
     force: Annotated[bool, _flag("--force", "-f", help="Overwrite the report file.")] = False,
     quiet: Annotated[bool, _flag("--quiet", "-q", help="Print only errors.")] = False,
+    grid: Annotated[
+        str | None,
+        typer.Option(
+            help="The volume the mesh came from: boundary edges on its grid are not holes "
+            "(default: the grid recorded in a PLY/OBJ header, else the bounding box).",
+            rich_help_panel="Checks",
+        ),
+    ] = None,
+    input_format: InputFormatOpt = None,
+    shape: ShapeOpt = None,
+    dtype: DtypeOpt = None,
+    endian: EndianOpt = Endian.little,
+    header_bytes: HeaderBytesOpt = 0,
+    spacing: SpacingOpt = None,
+    origin: OriginOpt = None,
+    allow_outside_data: AllowOutsideOpt = False,
 ) -> None:
     """Report on a mesh file: degenerate elements, holes, manifoldness, orientation, topology."""
     from .meshfile import read_mesh
-    from .report import check_mesh, parse_requirements
+    from .report import check_mesh, grid_from_volume, parse_requirements
 
     required = parse_requirements(require)
-    checked = check_mesh(read_mesh(mesh_file), examples=examples, source=str(mesh_file))
+    frame = None
+    if grid is not None:
+        from .readers import read_volume
+
+        kwargs = _read_kwargs(
+            input_format,
+            shape,
+            dtype,
+            endian,
+            header_bytes,
+            None,
+            spacing,
+            origin,
+            allow_outside_data,
+        )
+        frame = grid_from_volume(read_volume(grid, format=kwargs.pop("input_format"), **kwargs))
+    mesh = read_mesh(mesh_file)
+    checked = check_mesh(mesh, examples=examples, source=str(mesh_file), grid=frame)
     if report is not None and report != "-":
         _emit_report(checked, report, [], as_json=False, force=force, quiet=True)
     _emit_report(checked, "-", required, as_json=as_json, force=force, quiet=quiet)

@@ -157,3 +157,37 @@ def test_warmup_refuses_unknown_names(capsys):
     code = main(["warmup", "--dtypes", "float16"])
     err = capsys.readouterr().err
     assert code == 1 and "float16" in err
+
+
+def test_check_grid_judges_holes_against_the_volume_grid(tmp_path, capsys):
+    """FLAIR's oblique grid, cut at z index 60 so the surface meets the grid's
+    boundary: in an STL (which records no grid) those boundary edges look like
+    holes against the bounding box; `check --grid VOLUME` knows better, and
+    agrees with `convert --report`."""
+    import nrrd
+    from conftest import dataset
+
+    data, header = nrrd.read(str(dataset("FLAIR.nrrd")), index_order="F")
+    cut = tmp_path / "flair_cut.nrrd"
+    origin = header["space origin"] + 60 * header["space directions"][2]
+    nrrd.write(
+        str(cut),
+        data[:, :, 60:],
+        {
+            "space": header["space"],
+            "space directions": header["space directions"],
+            "space origin": origin,
+        },
+        index_order="F",
+    )
+    out = tmp_path / "flair.stl"
+    code, _, err = run(
+        capsys, "convert", cut, "-l", "60.5", "-o", out, "--require", "no-holes", "-q"
+    )
+    assert code == 0, err
+    code, stdout, _ = run(capsys, "check", out, "--require", "no-holes")
+    assert code == 4
+    assert "--grid" in stdout  # the bounding-box fallback is said
+    code, stdout, err = run(capsys, "check", out, "--grid", cut, "--require", "no-holes")
+    assert code == 0, err
+    assert "bounding box" not in stdout

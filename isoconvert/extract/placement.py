@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh import Mesh
+from ..report import grid_from_volume
 from ..volume import Volume
 
 
@@ -33,10 +34,6 @@ def finish_mesh(
         "source": volume.source,
         "flip": flip,
         # the grid, so checks can tell the grid's boundary from holes
-        "grid": {
-            "shape": list(volume.shape),
-            "origin": volume.origin.tolist(),
-            "affine": volume.affine.tolist(),
-        },
+        "grid": grid_from_volume(volume),
     }
     return Mesh(verts, cells, edge_ids, info)
