@@ -1,4 +1,9 @@
-"""Histogram, Otsu threshold and suggested isovalues, without extracting."""
+"""Histogram, Otsu threshold and suggested isovalues, without extracting.
+
+Everything here works over any finite range of values, up to the largest
+doubles (about ±1.8e308): no step computes ``hi - lo`` or ``a + b`` of two
+samples where that could overflow.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +14,69 @@ import numpy as np
 from .volume import slabs, value_range
 
 _FLOAT_BINS = 1024
+#: Integers are counted one bin per value only where float64 holds each exactly.
+_EXACT_INTEGERS = 2.0**53
+
+
+def equal_bins(lo: float, hi: float, n: int) -> np.ndarray:
+    """Edges of ``n`` equal bins from ``lo`` to ``hi``, for any finite ``lo <= hi``.
+
+    As ``np.linspace(lo, hi, n + 1)`` where ``hi - lo`` is a finite double (then
+    the result is exactly linspace's); where it overflows (``lo`` and ``hi`` near
+    the largest doubles with opposite signs), the edges are found from the halves
+    of ``lo`` and ``hi`` and doubled again, which is exact in binary. When
+    ``hi <= lo`` (a constant volume) the bins span ``lo`` to ``lo + 1``, or the
+    nearest wider span that float64 can tell from ``lo``.
+
+    Parameters
+    ----------
+    lo, hi : float
+        Finite ends of the range.
+    n : int
+        Number of bins, at least 1.
+
+    Returns
+    -------
+    (n + 1,) float64
+        Non-decreasing, finite edges; the first is ``lo``, the last ``hi`` (or
+        the widened end).
+    """
+    lo, hi = float(lo), float(hi)
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise ValueError(f"equal_bins needs finite ends, got {lo!r} .. {hi!r}")
+    if n < 1:
+        raise ValueError(f"equal_bins needs at least one bin, got {n}")
+    if not hi > lo:
+        lo, hi = _widen(lo)
+    if np.isfinite(hi - lo):
+        return np.linspace(lo, hi, n + 1)
+    edges = 2.0 * np.linspace(lo / 2, hi / 2, n + 1)
+    edges[0], edges[-1] = lo, hi
+    return edges
+
+
+def _widen(value: float) -> tuple[float, float]:
+    """A span ``lo < hi`` holding ``value`` at its low end (its high end at the top)."""
+    width = max(1.0, abs(value) * 2.0**-40)
+    if np.isfinite(value + width):
+        return value, value + width
+    return value - width, value
+
+
+def midpoint(a: np.ndarray | float, b: np.ndarray | float) -> np.ndarray | float:
+    """``(a + b) / 2`` without overflow; equal to ``0.5 * (a + b)`` wherever that is finite.
+
+    Parameters
+    ----------
+    a, b : float or (N,) float64
+        Finite values.
+
+    Returns
+    -------
+    float or (N,) float64
+    """
+    # halving is exact in binary (away from subnormals), so this rounds once, as a + b does
+    return 0.5 * np.asarray(a, dtype=np.float64) + 0.5 * np.asarray(b, dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -33,9 +101,10 @@ class Histogram:
 
     @property
     def centers(self) -> np.ndarray:
+        """The value each bin stands for, (B,) float64 (finite for any finite edges)."""
         if self.integer:
             return self.edges[:-1]
-        return 0.5 * (self.edges[:-1] + self.edges[1:])
+        return midpoint(self.edges[:-1], self.edges[1:])
 
     def percentile(self, q: float) -> float:
         """The value below which ``q`` percent of the samples lie (bin accuracy)."""
@@ -45,13 +114,29 @@ class Histogram:
 
 
 def histogram(data: np.ndarray) -> Histogram:
-    """Histogram of finite samples: one bin per value for integers with a range of at most
-    65536 values, else 1024 equal bins. Scans slab by slab (no full-size temporary)."""
+    """Histogram of the finite samples of ``data``.
+
+    One bin per value for integers with a range of at most 65536 values (and
+    magnitudes float64 holds exactly), else 1024 equal bins (:func:`equal_bins`,
+    so any finite range works). Scans slab by slab (no full-size temporary).
+
+    Parameters
+    ----------
+    data : (X, Y[, Z]) array of real numbers
+
+    Returns
+    -------
+    Histogram
+    """
     rng = value_range(data)
     if not np.isfinite(rng.min):
         return Histogram(np.array([0.0, 1.0]), np.zeros(1, np.int64), False, rng.nonfinite)
     lo, hi = rng.min, rng.max
-    integer = np.issubdtype(data.dtype, np.integer) and hi - lo < 65536
+    integer = (
+        np.issubdtype(data.dtype, np.integer)
+        and hi - lo < 65536
+        and max(abs(lo), abs(hi)) < _EXACT_INTEGERS
+    )
     if integer:
         counts = np.zeros(int(hi - lo) + 1, dtype=np.int64)
         for slab in slabs(data):
@@ -60,10 +145,11 @@ def histogram(data: np.ndarray) -> Histogram:
             )
         edges = np.arange(lo, hi + 2, dtype=np.float64)
         return Histogram(edges, counts, True, 0)
-    edges = np.linspace(lo, hi if hi > lo else lo + 1, _FLOAT_BINS + 1)
+    edges = equal_bins(lo, hi, _FLOAT_BINS)
     counts = np.zeros(_FLOAT_BINS, dtype=np.int64)
     for slab in slabs(data):
         values = slab[np.isfinite(slab)] if rng.nonfinite else slab
+        # explicit edges: numpy searches them (no (hi - lo) scaling that could overflow)
         counts += np.histogram(values, bins=edges)[0]
     return Histogram(edges, counts, False, rng.nonfinite)
 
@@ -74,25 +160,63 @@ def otsu_level(hist: Histogram) -> float:
     Returned as a level for the sign rule (positive = value >= level): the
     midpoint between the last value of the lower class and the next bin, so
     for integer data it is a half-integer that no sample equals.
+
+    The variance is computed on bin positions mapped affinely onto 0 .. B - 1
+    (Otsu's cut does not change under an affine map of the values), so values
+    near the largest doubles do not overflow; the cut is mapped back to values.
+
+    Parameters
+    ----------
+    hist : Histogram
+        B bins.
+
+    Returns
+    -------
+    float
+        The level; finite for any finite histogram.
     """
     counts = hist.counts.astype(np.float64)
     centers = hist.centers
     if len(counts) < 2:
         return float(centers[0])
+    x = _positions(centers)
     w0 = np.cumsum(counts)[:-1]
     w1 = counts.sum() - w0
-    m = np.cumsum(counts * centers)[:-1]
+    m = np.cumsum(counts * x)[:-1]
     mu0 = m / np.where(w0 > 0, w0, 1)
-    mu1 = (m[-1] + counts[-1] * centers[-1] - m) / np.where(w1 > 0, w1, 1)
+    mu1 = (m[-1] + counts[-1] * x[-1] - m) / np.where(w1 > 0, w1, 1)
     between = w0 * w1 * (mu0 - mu1) ** 2
     # between[b]: lower class = bins 0..b. Ties (flat plateaus) take the middle.
     best = np.flatnonzero(between == between.max())
     b = int(best[len(best) // 2])
-    return float(0.5 * (centers[b] + centers[b + 1]))
+    return float(midpoint(centers[b], centers[b + 1]))
+
+
+def _positions(centers: np.ndarray) -> np.ndarray:
+    """Bin centers (B,) mapped affinely onto 0 .. B - 1 without overflow.
+
+    For equal bins (all this module makes) these are the bin indices, up to
+    rounding; for integer bins exactly.
+    """
+    offset = 0.5 * centers - 0.5 * centers[0]  # finite: a difference of halves
+    span = offset[-1]
+    if not span > 0:
+        return np.arange(len(centers), dtype=np.float64)
+    return offset * ((len(centers) - 1) / span)
 
 
 def suggested_levels(hist: Histogram) -> dict[str, float]:
-    """Otsu and a few percentiles, as levels no integer sample equals."""
+    """Otsu and a few percentiles, as levels no integer sample equals.
+
+    Parameters
+    ----------
+    hist : Histogram
+
+    Returns
+    -------
+    dict of str to float
+        ``otsu``, ``p50``, ``p90``, ``p99``.
+    """
     levels = {"otsu": otsu_level(hist)}
     for q in (50, 90, 99):
         value = hist.percentile(q)
