@@ -262,3 +262,20 @@ def test_integer_level_on_integer_data_keeps_vtk_counts_without_degenerate_eleme
 
 def as_mesh(points, cells):
     return isoconvert.Mesh(np.asarray(points, np.float64), np.asarray(cells, np.int64))
+
+
+@pytest.mark.parametrize("method", ["cubes", "tetra", "squares"])
+def test_samples_near_the_largest_doubles_interpolate_as_scaled_down_ones(method):
+    """s1 - s0 overflows to infinity for samples of opposite sign near 1.7e308;
+    the vertex must still be the linear interpolation. Scaling all samples by a
+    power of two scales no interpolation fraction, so the mesh must equal that
+    of the scaled-down volume exactly."""
+    field = ball(12, 4.3)  # about -13 .. 4.3
+    huge = field * (1.7e308 / np.abs(field).max())
+    small = huge / 2.0**1000
+    kw = {"axis": "z"} if method == "squares" else {}
+    big = extract(Volume(huge), 0.0, method=method, **kw)
+    ref = extract(Volume(small), 0.0, method=method, **kw)
+    assert np.isfinite(big.vertices).all()
+    np.testing.assert_array_equal(big.vertices, ref.vertices)
+    np.testing.assert_array_equal(big.cells, ref.cells)

@@ -16,6 +16,8 @@ of the number of threads.
 import numpy as np
 from numba import njit, prange
 
+from .interpolate import edge_fraction
+
 
 @njit(cache=True, nogil=True)
 def _signs(f, level, k, out):
@@ -103,7 +105,7 @@ def _layer_xy(f, level, offset, k, sign, xmap, ymap, verts, edge_ids, n, write):
                 if write:
                     s0 = np.float64(f[k, j, i])
                     s1 = np.float64(f[k, j, i + 1])
-                    t = min(max((level - s0) / (s1 - s0), offset), 1.0 - offset)
+                    t = edge_fraction(s0, s1, level, offset)
                     verts[n, 0] = i + t
                     verts[n, 1] = j
                     verts[n, 2] = k
@@ -114,7 +116,7 @@ def _layer_xy(f, level, offset, k, sign, xmap, ymap, verts, edge_ids, n, write):
                 if write:
                     s0 = np.float64(f[k, j, i])
                     s1 = np.float64(f[k, j + 1, i])
-                    t = min(max((level - s0) / (s1 - s0), offset), 1.0 - offset)
+                    t = edge_fraction(s0, s1, level, offset)
                     verts[n, 0] = i
                     verts[n, 1] = j + t
                     verts[n, 2] = k
@@ -186,7 +188,7 @@ def fill_cubes(
                     if lo[j, i] != hi[j, i]:
                         s0 = np.float64(f[k, j, i])
                         s1 = np.float64(f[k + 1, j, i])
-                        t = min(max((level - s0) / (s1 - s0), offset), 1.0 - offset)
+                        t = edge_fraction(s0, s1, level, offset)
                         verts[n, 0] = i
                         verts[n, 1] = j
                         verts[n, 2] = k + t

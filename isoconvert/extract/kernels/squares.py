@@ -12,6 +12,8 @@ square; book section 2.2.5).
 import numpy as np
 from numba import njit
 
+from .interpolate import edge_fraction
+
 
 @njit(cache=True, nogil=True)
 def count_squares(f, level, n_segments):
@@ -74,7 +76,7 @@ def fill_squares(
             if i + 1 < nx:
                 s1 = np.float64(f[j, i + 1])
                 if p0 != (s1 >= level):
-                    verts[n, 0] = i + min(max((level - s0) / (s1 - s0), offset), 1.0 - offset)
+                    verts[n, 0] = i + edge_fraction(s0, s1, level, offset)
                     verts[n, 1] = j
                     edge_ids[n] = 2 * (i + nx * j)
                     xmap[j, i] = n
@@ -83,7 +85,7 @@ def fill_squares(
                 s1 = np.float64(f[j + 1, i])
                 if p0 != (s1 >= level):
                     verts[n, 0] = i
-                    verts[n, 1] = j + min(max((level - s0) / (s1 - s0), offset), 1.0 - offset)
+                    verts[n, 1] = j + edge_fraction(s0, s1, level, offset)
                     edge_ids[n] = 2 * (i + nx * j) + 1
                     ymap[j, i] = n
                     n += 1

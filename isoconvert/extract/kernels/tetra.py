@@ -12,6 +12,8 @@ directions), ``maps_hi[d]`` the in-layer ones (x, y, xy) of its upper layer.
 import numpy as np
 from numba import njit
 
+from .interpolate import edge_fraction
+
 
 @njit(cache=True, nogil=True)
 def _bipolar(f, level, k, j, i, d, dirs):
@@ -58,7 +60,7 @@ def _number(f, level, offset, k, d, dirs, maps, verts, edge_ids, n):
                 continue
             s0 = np.float64(f[k, j, i])
             s1 = np.float64(f[k + dz, j + dy, i + dx])
-            t = min(max((level - s0) / (s1 - s0), offset), 1.0 - offset)
+            t = edge_fraction(s0, s1, level, offset)
             verts[n, 0] = i + t * dx
             verts[n, 1] = j + t * dy
             verts[n, 2] = k + t * dz
