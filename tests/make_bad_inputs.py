@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import gzip
 import sys
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,6 +30,15 @@ def _nrrd_header(sizes="4 4 3", type_="short", encoding="raw", extra="") -> byte
         f"NRRD0004\ndimension: {len(sizes.split())}\ntype: {type_}\nsizes: {sizes}\n"
         f"endian: little\nencoding: {encoding}\n{extra}\n"
     ).encode()
+
+
+def gzip_bomb(n_bytes: int) -> bytes:
+    """gzip data that expands to ``n_bytes`` zeros (about 1/1000 of that compressed)."""
+    packer = zlib.compressobj(9, zlib.DEFLATED, zlib.MAX_WBITS | 16)
+    chunk = bytes(1 << 20)
+    parts = [packer.compress(chunk) for _ in range(n_bytes >> 20)]
+    parts.append(packer.compress(bytes(n_bytes & ((1 << 20) - 1))))
+    return b"".join(parts) + packer.flush()
 
 
 def make_bad_inputs(folder: Path) -> dict[str, Case]:
@@ -90,10 +100,59 @@ def make_bad_inputs(folder: Path) -> dict[str, Case]:
         says=("nowhere.raw", "missing"),
     )
     put("not_nrrd.nrrd", b"\x00\xffgarbage\n" * 4, says=("not a readable NRRD",))
+    # issue 8: NRRD type block, LIST data, data files outside the header's folder, bombs
+    put(
+        "block_type.nrrd",
+        _nrrd_header(type_="block", extra="block size: 4\n") + bytes(192),
+        says=("type 'block'", "not numbers"),
+    )
+    put(
+        "list_missing_part.nhdr",
+        _nrrd_header(extra="data file: LIST\nlist_part0.raw\nlist_part1.raw\nlist_part2.raw"),
+        says=("list_part0.raw", "missing"),
+    )
+    put(
+        "outside_data.nhdr",
+        _nrrd_header(extra="data file: ../outside_secret.raw"),
+        says=("outside_secret.raw", "outside the header's folder", "--allow-outside-data"),
+    )
+    put(
+        "outside_absolute.nhdr",
+        _nrrd_header(extra="data file: /etc/hostname"),
+        says=("/etc/hostname", "--allow-outside-data"),
+    )
+    put(
+        "outside_numbered.nhdr",
+        _nrrd_header(extra="data file: ../slab%d.raw 0 2 1"),
+        says=("../slab0.raw", "--allow-outside-data"),
+    )
+    put(
+        "gzip_bomb.nrrd",
+        _nrrd_header(sizes="4 4 4", encoding="gzip") + gzip_bomb(32 << 20),
+        says=("holds more than the 128 bytes its header declares",),
+    )
+    put(
+        "gzip_short.nrrd",
+        _nrrd_header(encoding="gzip") + gzip.compress(good.tobytes()[:60]),
+        says=("holds 60 bytes, fewer than the 96",),
+    )
+    # issue 8: formats recognised but not read yet
+    put("scan.nii.gz", gzip.compress(bytes(352)), says=("NIfTI is not read yet", "NRRD"))
+    put("scan.nii", bytes(352), says=("NIfTI is not read yet",))
+    put("head.mhd", b"ObjectType = Image\nNDims = 3\n", says=("MetaImage is not read yet",))
+    put("head.mha", b"ObjectType = Image\nNDims = 3\n", says=("MetaImage is not read yet",))
+    dicom = bytes(128) + b"DICM" + bytes(64)
+    put("slice.dcm", dicom, says=("DICOM is not read yet",))
+    put("IM0001", dicom, says=("DICOM is not read yet",))
     tif = folder / "_good.tif"
     tifffile.imwrite(tif, good.astype(np.uint8), photometric="minisblack")
     put("truncated.tif", tif.read_bytes()[: len(tif.read_bytes()) // 2], says=("not a readable",))
     tif.unlink()
+    odd = folder / "odd_page.tif"
+    with tifffile.TiffWriter(odd) as tw:  # plain pages, no ImageJ/OME/shape metadata
+        for shape in ((4, 5), (4, 5), (6, 7), (4, 5)):
+            tw.write(np.zeros(shape, np.uint8), photometric="minisblack", metadata=None)
+    cases["odd_page.tif"] = Case(odd, [], ("page 3 of 4 is 7x6 uint8", "page 1 is 5x4 uint8"))
     complex_tif = folder / "complex.tif"
     tifffile.imwrite(complex_tif, np.ones((3, 4, 5), np.complex64), photometric="minisblack")
     cases["complex.tif"] = Case(complex_tif, [], ("complex64", "real"))

@@ -14,7 +14,7 @@ from .image import IMAGE_SUFFIXES, read_image
 from .nrrd import read_nrrd
 from .options import ReadOptions
 from .raw import read_raw
-from .tiff import TIFF_SUFFIXES, read_tiff
+from .tiff import TIFF_SUFFIXES, natural_key, read_tiff
 
 
 @dataclass(frozen=True)
@@ -49,7 +49,7 @@ READERS.register(
         "NRRD, attached (.nrrd) or detached (.nhdr), raw/gzip/bzip2, multi-file data",
         (".nrrd", ".nhdr"),
         read_nrrd,
-        frozenset({"channel"}),
+        frozenset({"channel", "allow_outside_data"}),
     ),
 )
 READERS.register(
@@ -73,6 +73,104 @@ READERS.register(
         frozenset({"channel"}),
     ),
 )
+
+
+# Formats recognised but not read yet (a later issue): what to call them in messages.
+_NOT_READ_YET = {
+    ".nii": "NIfTI",
+    ".mhd": "MetaImage",
+    ".mha": "MetaImage",
+    ".dcm": "DICOM",
+    ".dicom": "DICOM",
+}
+_TOOLS = "(e.g. with 3D Slicer or SimpleITK)"
+_CONVERT = f"convert it to NRRD first {_TOOLS}"
+_DICOM_CHECKS = 16  # files of a folder looked at for the DICOM magic
+
+
+def _is_dicom(path: Path) -> bool:
+    """True when the file has the DICOM magic "DICM" after its 128-byte preamble."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(132)
+    except OSError:
+        return False
+    return head[128:132] == b"DICM"
+
+
+def _kind_not_read(path: Path, look_inside: bool = True) -> str | None:
+    name = path.name.lower()
+    if name.endswith(".nii.gz"):
+        return "NIfTI"
+    kind = _NOT_READ_YET.get(path.suffix.lower())
+    if kind is None and look_inside and READERS.by_suffix(path.suffix) is None:
+        # DICOM files often have no suffix (or a number): only the magic tells
+        kind = "DICOM" if _is_dicom(path) else None
+    return kind
+
+
+def unsupported_format(path: Path) -> str | None:
+    """Why ``path`` cannot be read yet, when it is a format isoconvert knows but does not read.
+
+    Recognises NIfTI (``.nii``, ``.nii.gz``), MetaImage (``.mhd``, ``.mha``) and
+    DICOM (``.dcm``, or the "DICM" magic at byte 128 of a file whose suffix no
+    reader claims), and folders of DICOM files. Cheap enough to call on every
+    file of a folder: it reads at most 132 bytes, and only of files whose
+    suffix no reader claims.
+
+    Parameters
+    ----------
+    path : Path
+        A file or folder.
+
+    Returns
+    -------
+    str or None
+        A one-line reason naming the format and what to do, without the path
+        (a batch skip reason; :func:`read_volume` raises it as
+        ``"PATH: REASON"``), or None when the path is not such a format.
+    """
+    path = Path(path)
+    try:
+        if path.is_dir():
+            return _unsupported_folder(path)
+        if not path.is_file():
+            return None
+    except OSError:
+        return None
+    kind = _kind_not_read(path)
+    if kind is None:
+        return None
+    if kind == "DICOM":
+        return f"DICOM is not read yet; convert the series to NRRD first {_TOOLS}"
+    return f"{kind} is not read yet; {_CONVERT}"
+
+
+def _unsupported_folder(folder: Path) -> str | None:
+    """A folder that holds no TIFF slices but files of a format not read yet."""
+    try:
+        files = sorted((p for p in folder.iterdir() if p.is_file()), key=natural_key)
+    except OSError:
+        return None
+    if any(p.suffix.lower() in TIFF_SUFFIXES for p in files):
+        return None
+    dicom = [p for p in files if _kind_not_read(p, look_inside=False) == "DICOM"]
+    if not dicom:
+        unknown = [p for p in files if READERS.by_suffix(p.suffix) is None]
+        dicom = [p for p in unknown[:_DICOM_CHECKS] if _is_dicom(p)]
+    if dicom:
+        return (
+            f"DICOM is not read yet (a folder of DICOM files such as {dicom[0].name}); "
+            f"convert the series to NRRD first {_TOOLS}"
+        )
+    for p in files:
+        kind = _kind_not_read(p, look_inside=False)
+        if kind:
+            return (
+                "a folder is read as a stack of TIFF slices and this one holds none; "
+                f"it holds {kind} ({p.name}), which is not read yet; {_CONVERT}"
+            )
+    return None
 
 
 def detect_format(spec: str) -> str:
@@ -115,7 +213,14 @@ def read_volume(
         Override what the file says (x, y[, z]).
     **options
         Fields of :class:`ReadOptions`: ``shape``, ``dtype``, ``endian``,
-        ``header_bytes`` (raw), ``channel`` (multi-channel images).
+        ``header_bytes`` (raw), ``channel`` (multi-channel images),
+        ``allow_outside_data`` (detached NRRD data outside the header's folder).
+
+    Raises
+    ------
+    FormatError
+        Among others, for a format recognised but not read yet (see
+        :func:`unsupported_format`), unless ``format`` names a reader.
 
     Returns
     -------
@@ -125,6 +230,10 @@ def read_volume(
     p = Path(spec)
     if not p.exists() and not (globlib.has_magic(spec) and globlib.glob(spec)):
         raise InputNotFoundError(f"{spec}: no such file or folder")
+    if format is None:
+        reason = unsupported_format(p) if p.exists() else None
+        if reason:
+            raise FormatError(f"{spec}: {reason}")
     name = format.lower() if format else detect_format(spec)
     reader = READERS.get(name)
     if (p.is_dir() or not p.exists()) and not reader.stacks:
@@ -133,7 +242,9 @@ def read_volume(
         opts = ReadOptions(**options)
     except TypeError as exc:
         raise VolumeError(f"unknown read option: {exc}") from None
-    stray = opts.given() - reader.options
+    # permission to read companion files is harmless where a format has none, so
+    # one --allow-outside-data can apply to a whole batch
+    stray = opts.given() - reader.options - {"allow_outside_data"}
     if stray:
         flags = ", ".join("--" + s.replace("_", "-") for s in sorted(stray))
         raise VolumeError(f"{spec}: {flags} do(es) not apply to {name} input")
@@ -168,4 +279,11 @@ def read_volume(
     return volume
 
 
-__all__ = ["READERS", "Reader", "ReadOptions", "detect_format", "read_volume"]
+__all__ = [
+    "READERS",
+    "Reader",
+    "ReadOptions",
+    "detect_format",
+    "read_volume",
+    "unsupported_format",
+]

@@ -1,8 +1,21 @@
-"""NRRD volumes (pynrrd): attached .nrrd, detached .nhdr, multi-file data."""
+"""NRRD volumes: attached .nrrd, detached .nhdr, multi-file data.
+
+pynrrd parses the header fields and reads the ascii encoding, where the file's
+size bounds the work. The binary encodings (raw, gzip, bzip2) and hex are read
+here, so that compressed data is never decompressed past the size the header
+declares (a gzip bomb stops after a few MiB) and raw data is memory-mapped.
+Detached data files must lie in the header's folder or below unless the caller
+allows otherwise (``allow_outside_data``): a header from elsewhere must not be
+able to make the tool read any file on the machine.
+"""
 
 from __future__ import annotations
 
+import bz2
+import os
 import re
+import zlib
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +27,36 @@ from .options import ReadOptions, select_channel
 
 # "data file: <format> <min> <max> <step> [<subdim>]" (NRRD spec, detached headers)
 _MULTI_FILE = re.compile(r"^(\S*%\S*)\s+(-?\d+)\s+(-?\d+)\s+(-?\d+)(?:\s+(\d+))?$")
+# "data file: LIST [<subdim>]": the file names follow, one per line
+_LIST_FIELD = re.compile(r"^data ?file\s*:\s*LIST(?:\s+(\S+))?\s*$")
+
+_MAX_LINE = 1 << 20  # bytes of one header line
+_MAX_HEADER = 64 << 20  # bytes of a whole header (a LIST of many files included)
+_IN_CHUNK = 1 << 20  # compressed bytes read at a time
+_OUT_CHUNK = 4 << 20  # decompressed bytes produced at a time
+_GUIDE = "convert it with 3D Slicer or unu (teem)"
+
+_ENCODINGS = {
+    "raw": "raw",
+    "gzip": "gzip",
+    "gz": "gzip",
+    "bzip2": "bzip2",
+    "bz2": "bzip2",
+    "ascii": "ascii",
+    "text": "ascii",
+    "txt": "ascii",
+    "hex": "hex",
+}
+
+
+@dataclass
+class _Header:
+    """A parsed header, where its attached data starts, and the names of a LIST."""
+
+    fields: dict
+    data_offset: int
+    listed: list[str] | None = None
+    list_subdim: str | None = None
 
 
 def read_nrrd(path: Path, options: ReadOptions) -> Volume:
@@ -22,29 +65,20 @@ def read_nrrd(path: Path, options: ReadOptions) -> Volume:
     ``space directions`` give spacing (their lengths) and direction (their unit
     vectors); else ``spacings``; ``space origin`` gives the origin. Vertex
     positions are then in the file's world space (e.g. LPS for medical data).
+    Detached data (one file, numbered files, or a ``LIST``) must lie in the
+    header's folder or below unless ``options.allow_outside_data``.
     """
-    import nrrd
-
-    try:
-        header = nrrd.read_header(str(path))
-    except (nrrd.NRRDError, UnicodeDecodeError, ValueError, IndexError) as exc:
-        raise FormatError(f"{path}: not a readable NRRD header ({one_line(exc)})") from None
+    parsed = _read_header(path)
+    header = parsed.fields
+    if str(header.get("type", "")).strip().lower() == "block":
+        raise VolumeError(
+            f"{path}: NRRD type 'block' holds opaque blocks of {header.get('block size', '?')} "
+            "bytes, not numbers; only numeric sample types (uchar, short, float, ...) "
+            "can be contoured"
+        )
     _check_declared_size(path, header)
-    data_file = str(header.get("data file", header.get("datafile", "")))
-    try:
-        if data_file.startswith("LIST"):
-            raise FormatError(
-                f"{path}: detached data as 'data file: LIST' is not supported; "
-                "use the 'data file: name.%d min max step' form or one data file"
-            )
-        if _MULTI_FILE.match(data_file):
-            data = _read_multi_file(path, header, data_file)
-        else:
-            data = nrrd.read(str(path), index_order="F")[0]
-    except FileNotFoundError as exc:
-        raise FormatError(f"{path}: its data file {exc.filename} is missing") from None
-    except (nrrd.NRRDError, OSError, ValueError, EOFError) as exc:
-        raise FormatError(f"{path}: the NRRD data cannot be read ({one_line(exc)})") from None
+    files, subdim = _data_files(path, parsed, options.allow_outside_data)
+    data = _read_data(path, parsed, files, subdim)
     data, domain = _domain_axes(path, header, data, options.channel)
     spacing, direction, notes = _placement(header, domain)
     origin = header.get("space origin")
@@ -68,55 +102,470 @@ def read_nrrd(path: Path, options: ReadOptions) -> Volume:
     )
 
 
+def detached_data_files(path: Path) -> list[Path]:
+    """The files a detached NRRD header names as its data, resolved; [] when attached.
+
+    For tools that need to know which files belong to a header (batch). Names
+    outside the header's folder are listed too; reading refuses them.
+
+    Parameters
+    ----------
+    path : Path
+        The header (.nhdr or .nrrd).
+
+    Returns
+    -------
+    list of Path
+        One path per data file, in order; empty for attached data or an
+        unreadable header.
+    """
+    try:
+        parsed = _read_header(path)
+        files, _ = _data_files(path, parsed, allow_outside=True, check=False)
+    except Exception:  # an unreadable header names no files
+        return []
+    return [f.resolve() for f in files or []]
+
+
+# --- header ---------------------------------------------------------------------------------
+
+
+def _read_header(path: Path) -> _Header:
+    """Parse the header with pynrrd, after taking a ``data file: LIST`` apart.
+
+    pynrrd reads ``key: value`` lines only, so the file names of a LIST (one per
+    line after the LIST field) are split off here.
+    """
+    import nrrd
+
+    try:
+        with open(path, "rb") as fh:
+            first = fh.readline(_MAX_LINE)
+            if not first.startswith(b"NRRD"):
+                raise FormatError(
+                    f"{path}: not a readable NRRD header (the file does not start with 'NRRD')"
+                )
+            lines = [first.decode("ascii", "replace").rstrip()]
+            listed: list[str] | None = None
+            subdim = None
+            total = len(first)
+            while True:
+                raw = fh.readline(_MAX_LINE)
+                if not raw:
+                    break
+                total += len(raw)
+                if total > _MAX_HEADER or (len(raw) == _MAX_LINE and not raw.endswith(b"\n")):
+                    raise FormatError(
+                        f"{path}: not a readable NRRD header (no blank line ends it within "
+                        f"{_MAX_HEADER >> 20} MiB, or a line is longer than 1 MiB)"
+                    )
+                text = raw.decode("utf-8", "surrogateescape").rstrip()
+                if not text:
+                    break
+                if listed is not None:
+                    listed.append(text)
+                    continue
+                match = _LIST_FIELD.match(text)
+                if match:
+                    listed, subdim = [], match.group(1)
+                else:
+                    lines.append(text)
+    except FormatError:
+        raise
+    except OSError as exc:
+        raise FormatError(f"{path}: cannot read the NRRD header ({one_line(exc)})") from None
+    try:
+        fields = nrrd.read_header(lines)
+    except (nrrd.NRRDError, UnicodeError, ValueError, IndexError, KeyError, TypeError) as exc:
+        raise FormatError(f"{path}: not a readable NRRD header ({one_line(exc)})") from None
+    if listed is not None and ("data file" in fields or "datafile" in fields):
+        raise FormatError(f"{path}: the NRRD header has two 'data file' fields; keep one")
+    return _Header(dict(fields), total, listed, subdim)
+
+
 def _check_declared_size(path: Path, header: dict) -> None:
-    """The header's sizes must be positive and fit in memory before pynrrd allocates."""
+    """The header's sizes must be positive and name a known sample type."""
     from nrrd.reader import _determine_datatype
 
     try:
         sizes = [int(s) for s in header["sizes"]]
         # the byte order does not change the size (and 1-byte types may omit it)
-        itemsize = _determine_datatype({**header, "endian": "little"}).itemsize
+        _determine_datatype({**header, "endian": "little"})
     except Exception as exc:  # pynrrd raises several kinds for a bad header
         raise FormatError(
             f"{path}: the NRRD header has no usable sizes or type ({one_line(exc)})"
         ) from None
     if any(s <= 0 for s in sizes):
         raise VolumeError(f"{path}: the NRRD header declares sizes {sizes}; all must be >= 1")
-    check_fits(int(np.prod(sizes, dtype=np.float64)) * itemsize, "the declared volume", str(path))
-
-
-def _read_multi_file(path: Path, header: dict, data_file: str) -> np.ndarray:
-    """Read data split over numbered files, as VTK's headsq (quarter.%d 1 93 1)."""
-    import nrrd
-
-    fmt, lo, hi, step, subdim = _MULTI_FILE.match(data_file).groups()
-    lo, hi, step = int(lo), int(hi), int(step)
-    if step == 0 or (hi - lo) * step < 0:
-        raise FormatError(f"{path}: 'data file' range {lo}..{hi} step {step} is empty")
-    names = [fmt % n for n in range(lo, hi + (1 if step > 0 else -1), step)]
-    sizes = [int(s) for s in header["sizes"]]
-    subdim = int(subdim) if subdim else len(sizes) - 1
-    per_file = sizes[:subdim]
-    outer = int(np.prod(sizes[subdim:]))
-    if outer % len(names):
+    if int(header.get("dimension", len(sizes))) != len(sizes):
         raise FormatError(
-            f"{path}: {len(names)} data files cannot split {outer} slices evenly; "
+            f"{path}: the NRRD header says dimension {header.get('dimension')} but gives "
+            f"{len(sizes)} sizes; make them agree"
+        )
+
+
+# --- which files hold the data --------------------------------------------------------------
+
+
+def _data_files(
+    path: Path, parsed: _Header, allow_outside: bool, check: bool = True
+) -> tuple[list[Path] | None, int | None]:
+    """The data files (None: attached) and how many axes each holds (None: all)."""
+    header = parsed.fields
+    sizes = [int(s) for s in header["sizes"]]
+    if parsed.listed is not None:
+        names = parsed.listed
+        subdim = _subdim(path, parsed.list_subdim, len(sizes))
+        if not names:
+            raise FormatError(
+                f"{path}: 'data file: LIST' names no files; list them one per line after it"
+            )
+        _check_split(path, len(names), sizes, subdim)
+    else:
+        value = str(header.get("data file", header.get("datafile", ""))).strip()
+        if not value:
+            return None, None
+        multi = _MULTI_FILE.match(value)
+        if multi:
+            fmt, lo, hi, step, sub = multi.groups()
+            lo, hi, step = int(lo), int(hi), int(step)
+            numbers = range(lo, hi + (1 if step > 0 else -1), step) if step else range(0)
+            if not numbers:
+                raise FormatError(f"{path}: 'data file' range {lo}..{hi} step {step} is empty")
+            subdim = _subdim(path, sub, len(sizes))
+            _check_split(path, len(numbers), sizes, subdim)
+            try:
+                names = [fmt % n for n in numbers]
+            except (TypeError, ValueError) as exc:
+                raise FormatError(
+                    f"{path}: 'data file' pattern {fmt!r} is not a printf pattern for one "
+                    f"number ({one_line(exc)})"
+                ) from None
+        else:
+            names, subdim = [value], None
+    return [_data_path(path, name, allow_outside, check) for name in names], subdim
+
+
+def _subdim(path: Path, text: str | None, ndim: int) -> int:
+    if text is None:
+        return ndim - 1
+    if not text.isdigit() or not 1 <= int(text) <= ndim:
+        raise FormatError(f"{path}: 'data file' gives {text!r} axes per file; it must be 1..{ndim}")
+    return int(text)
+
+
+def _check_split(path: Path, n_files: int, sizes: list[int], subdim: int) -> None:
+    outer = int(np.prod(sizes[subdim:], dtype=np.float64))
+    if n_files > outer or outer % n_files:
+        raise FormatError(
+            f"{path}: {n_files} data files cannot split {outer} slices evenly; "
             "check the 'data file' line"
         )
-    count = outer // len(names)
-    blocks = []
-    for name in names:
-        part = dict(header)
-        part["data file"] = name
-        part.pop("datafile", None)
-        part["sizes"] = np.array(per_file + [count])
-        part["dimension"] = subdim + 1
-        for key in ("space directions", "kinds", "spacings", "centerings", "labels", "units"):
-            part.pop(key, None)
-        blocks.append(nrrd.read_data(part, filename=str(path), index_order="C"))
-    # C order: each block is (count, *reversed(per_file)); stacking runs along the slowest axis
-    stacked = np.concatenate(blocks, axis=0)
-    return stacked.reshape(sizes[::-1]).T
+
+
+def _data_path(header: Path, name: str, allow_outside: bool, check: bool = True) -> Path:
+    """The file ``name`` (relative to the header's folder), checked to be safe to read."""
+    if "\x00" in name or not name:
+        raise FormatError(f"{header}: 'data file' name {name!r} is not a file name")
+    candidate = header.parent / name
+    if not check:
+        return candidate
+    try:
+        resolved = candidate.resolve()
+        root = header.parent.resolve()
+    except (OSError, RuntimeError) as exc:
+        raise FormatError(
+            f"{header}: its data file {name} cannot be resolved ({one_line(exc)})"
+        ) from None
+    if not allow_outside and not resolved.is_relative_to(root):
+        raise FormatError(
+            f"{header}: its data file {name} resolves to {resolved}, outside the header's "
+            f"folder {root}; move the data beside the header, or pass --allow-outside-data "
+            "(allow_outside_data=True) if you trust this header"
+        )
+    if not resolved.exists():
+        raise FormatError(
+            f"{header}: its data file {name} is missing; put it beside the header or fix "
+            "the 'data file' line"
+        )
+    if not resolved.is_file():
+        raise FormatError(f"{header}: its data file {name} is not a regular file")
+    return candidate
+
+
+# --- reading the samples --------------------------------------------------------------------
+
+
+def _read_data(
+    path: Path, parsed: _Header, files: list[Path] | None, subdim: int | None
+) -> np.ndarray:
+    """All samples as an (x, y, z, ...) Fortran-ordered view of a C-ordered array."""
+    from nrrd.reader import _determine_datatype
+
+    header = parsed.fields
+    sizes = [int(s) for s in header["sizes"]]
+    total = int(np.prod(sizes, dtype=np.int64))
+    key = str(header.get("encoding", "")).strip()
+    encoding = _ENCODINGS.get(key.lower())
+    if encoding is None:
+        raise FormatError(
+            f"{path}: NRRD encoding {key!r} is not supported; use raw, gzip, bzip2, ascii or hex "
+            f"({_GUIDE})"
+        )
+    try:
+        dtype = _determine_datatype(header)
+    except Exception as exc:
+        raise FormatError(
+            f"{path}: the NRRD header has no usable type or endian ({one_line(exc)})"
+        ) from None
+    line_skip = int(header.get("line skip", header.get("lineskip", 0)))
+    byte_skip = int(header.get("byte skip", header.get("byteskip", 0)))
+    if line_skip < 0 or byte_skip < -1:
+        raise FormatError(
+            f"{path}: line skip {line_skip} / byte skip {byte_skip} are invalid "
+            "(line skip >= 0, byte skip >= -1)"
+        )
+    if byte_skip == -1 and encoding != "raw":
+        raise FormatError(
+            f"{path}: byte skip -1 (data at the end of the file) applies only to raw encoding, "
+            f"not {key}; give the number of bytes to skip"
+        )
+    sources: list[tuple[Path, int]] = (
+        [(path, parsed.data_offset)] if files is None else [(f, 0) for f in files]
+    )
+    per_part = total // len(sources)
+    described = f"sizes {' '.join(map(str, sizes))} of {header['type']}"
+    if len(sources) == 1 and encoding == "raw":
+        mapped = _map_raw(path, sources[0], per_part, dtype, line_skip, byte_skip, described)
+        if mapped is not None:
+            return mapped.reshape(sizes[::-1]).T
+    check_fits(total * dtype.itemsize, "the declared volume", str(path))
+    out = np.empty(total, dtype=dtype)
+    for i, source in enumerate(sources):
+        part = out[i * per_part : (i + 1) * per_part]
+        args = (path, source, part, line_skip, byte_skip, described)
+        if encoding == "raw":
+            _read_raw_part(*args)
+        elif encoding in ("gzip", "bzip2"):
+            _read_compressed_part(*args, encoding)
+        elif encoding == "hex":
+            _read_hex_part(*args)
+        else:
+            _read_ascii_part(*args, header)
+    return out.reshape(sizes[::-1]).T
+
+
+def _where(path: Path, source: tuple[Path, int]) -> str:
+    return "the file" if source[0] == path else f"its data file {source[0].name}"
+
+
+def _open_at_data(source: tuple[Path, int], line_skip: int):
+    """Open a data source positioned after the header and the skipped lines."""
+    fh = open(source[0], "rb")  # the caller closes it
+    try:
+        fh.seek(source[1])
+        for _ in range(line_skip):
+            while True:  # a "line" of binary data may be long: read it in pieces
+                piece = fh.readline(65536)
+                if not piece or piece.endswith(b"\n"):
+                    break
+    except BaseException:
+        fh.close()
+        raise
+    return fh
+
+
+def _raw_span(path, source, fh, nbytes, byte_skip, described) -> int:
+    """Offset of the raw samples in the open file, after checking their size."""
+    start = fh.tell()
+    size = os.fstat(fh.fileno()).st_size
+    if byte_skip == -1:
+        begin = size - nbytes
+        have = size - start
+    else:
+        begin = start + byte_skip
+        have = size - begin
+    # byte skip -1 means "the last nbytes of the file"; else the sizes must match exactly
+    if (have < nbytes) if byte_skip == -1 else (have != nbytes):
+        raise FormatError(
+            f"{path}: the NRRD data cannot be read: {_where(path, source)} holds {max(have, 0)} "
+            f"bytes of samples, but {described} need {nbytes}; check sizes, type, byte skip "
+            "and line skip"
+        )
+    return begin
+
+
+def _map_raw(path, source, count, dtype, line_skip, byte_skip, described):
+    """Memory-map a single raw data source (copy-on-write), or None when misaligned."""
+    nbytes = count * dtype.itemsize
+    with _open_at_data(source, line_skip) as fh:
+        begin = _raw_span(path, source, fh, nbytes, byte_skip, described)
+    if begin % dtype.itemsize:
+        return None  # unaligned samples would slow down or upset the kernels: read a copy
+    return np.asarray(np.memmap(source[0], dtype=dtype, mode="c", offset=begin, shape=(count,)))
+
+
+def _read_raw_part(path, source, out, line_skip, byte_skip, described) -> None:
+    with _open_at_data(source, line_skip) as fh:
+        begin = _raw_span(path, source, fh, out.nbytes, byte_skip, described)
+        fh.seek(begin)
+        view = memoryview(out.view(np.uint8))
+        got = 0
+        while got < len(view):
+            n = fh.readinto(view[got:])
+            if not n:
+                break
+            got += n
+    if got != out.nbytes:
+        raise FormatError(
+            f"{path}: the NRRD data cannot be read: {_where(path, source)} ended after {got} of "
+            f"{out.nbytes} bytes (it changed while being read?)"
+        )
+
+
+class _Inflater:
+    """Decompress a gzip or bzip2 stream in bounded pieces, member after member."""
+
+    def __init__(self, fh, encoding: str) -> None:
+        self._fh = fh
+        self._bz2 = encoding == "bzip2"
+        self._magic = b"BZh" if self._bz2 else b"\x1f\x8b"
+        self._pending = b""
+        self._exhausted = False
+        self._dec = self._new(first=True)
+
+    def _new(self, first: bool = False):
+        if self._bz2:
+            return bz2.BZ2Decompressor()
+        # the first member may also be a zlib stream, as some writers make
+        return zlib.decompressobj(zlib.MAX_WBITS | (32 if first else 16))
+
+    def _feed(self) -> None:
+        if not self._pending and not self._exhausted:
+            self._pending = self._fh.read(_IN_CHUNK)
+            self._exhausted = not self._pending
+
+    def chunk(self, limit: int) -> bytes:
+        """Up to ``limit`` decompressed bytes; b"" at the end of the data."""
+        while True:
+            if self._dec.eof:
+                rest = self._dec.unused_data + self._pending
+                self._pending = b""
+                if len(rest) < len(self._magic) and not self._exhausted:
+                    more = self._fh.read(_IN_CHUNK)
+                    self._exhausted = not more
+                    rest += more
+                if not rest.startswith(self._magic):
+                    return b""  # the end (any bytes after the last member are ignored)
+                self._dec, self._pending = self._new(), rest
+            self._feed()
+            if self._bz2 and not self._dec.needs_input:
+                data = b""
+            else:
+                data, self._pending = self._pending, b""
+            out = self._dec.decompress(data, limit)
+            if not self._bz2:
+                self._pending = self._dec.unconsumed_tail
+            if out:
+                return out
+            stuck = self._bz2 and not self._dec.needs_input
+            if self._exhausted and not self._pending and not self._dec.eof and not stuck:
+                raise EOFError("the compressed stream ends before its end marker")
+
+    def readinto(self, view: memoryview) -> int:
+        """Fill ``view``; the count is short only when the data ends."""
+        got = 0
+        while got < len(view):
+            piece = self.chunk(min(_OUT_CHUNK, len(view) - got))
+            if not piece:
+                break
+            view[got : got + len(piece)] = piece
+            got += len(piece)
+        return got
+
+    def skip(self, n: int) -> int:
+        """Drop ``n`` decompressed bytes; returns how many there were."""
+        done = 0
+        while done < n:
+            piece = self.chunk(min(_OUT_CHUNK, n - done))
+            if not piece:
+                break
+            done += len(piece)
+        return done
+
+
+def _read_compressed_part(path, source, out, line_skip, byte_skip, described, encoding) -> None:
+    where = "the file" if source[0] == path else f"data file {source[0].name}"
+    declared = byte_skip + out.nbytes
+    try:
+        with _open_at_data(source, line_skip) as fh:
+            inflater = _Inflater(fh, encoding)
+            got = inflater.skip(byte_skip)
+            if got == byte_skip:
+                got += inflater.readinto(memoryview(out.view(np.uint8)))
+            extra = got == declared and bool(inflater.chunk(1))
+    except (zlib.error, OSError, EOFError) as exc:
+        raise FormatError(
+            f"{path}: not a readable NRRD file: the {encoding} data in {where} is corrupt or "
+            f"truncated ({one_line(exc)})"
+        ) from None
+    if got < declared:
+        raise FormatError(
+            f"{path}: the NRRD data cannot be read: the compressed data in {where} holds {got} "
+            f"bytes, fewer than the {declared} its header declares ({described}); the file is "
+            "truncated or its sizes are wrong"
+        )
+    if extra:
+        raise FormatError(
+            f"{path}: the compressed data in {where} holds more than the {declared} bytes its "
+            f"header declares ({described}); the file is corrupt or its sizes are wrong"
+        )
+
+
+def _read_hex_part(path, source, out, line_skip, byte_skip, described) -> None:
+    """Hex encoding: two hex digits per byte, whitespace anywhere (the file bounds the work)."""
+    with _open_at_data(source, line_skip) as fh:
+        fh.seek(byte_skip, os.SEEK_CUR)
+        text = fh.read()
+    digits = b"".join(text.split())
+    try:
+        values = bytes.fromhex(digits.decode("ascii"))
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise FormatError(
+            f"{path}: not a readable NRRD file: the hex data in {_where(path, source)} is not "
+            f"pairs of hex digits ({one_line(exc)})"
+        ) from None
+    if len(values) != out.nbytes:
+        raise FormatError(
+            f"{path}: the NRRD data cannot be read: the hex data in {_where(path, source)} holds "
+            f"{len(values)} bytes, but {described} need {out.nbytes}"
+        )
+    out.view(np.uint8)[:] = np.frombuffer(values, np.uint8)
+
+
+def _read_ascii_part(path, source, out, line_skip, byte_skip, described, header) -> None:
+    """ascii encoding, through pynrrd (the text's size bounds the work)."""
+    import nrrd
+
+    part = {
+        "dimension": 1,
+        "sizes": np.array([out.size]),
+        "type": header["type"],
+        "encoding": "ascii",
+        "byte skip": byte_skip,
+    }
+    try:
+        with _open_at_data(source, line_skip) as fh:
+            values = nrrd.read_data(part, fh, str(path), index_order="C")
+    except (nrrd.NRRDError, ValueError) as exc:
+        raise FormatError(
+            f"{path}: the NRRD data cannot be read: the ascii data in {_where(path, source)} "
+            f"does not hold {out.size} numbers ({described}) ({one_line(exc)})"
+        ) from None
+    out[:] = values
+
+
+# --- axes and placement ---------------------------------------------------------------------
 
 
 def _domain_axes(path: Path, header: dict, data: np.ndarray, channel: int | None):
@@ -136,20 +585,43 @@ def _domain_axes(path: Path, header: dict, data: np.ndarray, channel: int | None
 
 
 def _placement(header: dict, domain: list[int]):
+    """Spacing, direction and notes; invalid values are ignored with a note saying so."""
     notes = []
     nd = len(domain)
     directions = header.get("space directions")
     if directions is not None:
-        rows = np.asarray(directions, dtype=np.float64)[domain]
-        if rows.shape == (nd, nd) and np.all(np.isfinite(rows)):
+        try:
+            rows = np.asarray(directions, dtype=np.float64)[domain]
+        except (ValueError, IndexError, TypeError):
+            rows = None
+        if rows is not None and rows.shape == (nd, nd) and np.all(np.isfinite(rows)):
             spacing = np.linalg.norm(rows, axis=1)
-            if np.all(spacing > 0):
+            if np.all(spacing > 0) and abs(np.linalg.det(rows / spacing[:, None])) > 1e-6:
                 return spacing, (rows / spacing[:, None]).T, notes
-        notes.append("space directions ignored (not one vector per spatial axis)")
+            notes.append(
+                "space directions in the NRRD header ignored (a zero-length or parallel "
+                "vector); set --spacing"
+            )
+        else:
+            notes.append(
+                "space directions in the NRRD header ignored (not one finite vector per "
+                "spatial axis); set --spacing"
+            )
     spacings = header.get("spacings")
     if spacings is not None:
-        spacing = np.asarray(spacings, dtype=np.float64)[domain]
-        if np.all(np.isfinite(spacing) & (spacing > 0)):
-            return spacing, None, notes
+        try:
+            values = np.asarray(spacings, dtype=np.float64)[domain]
+        except (ValueError, IndexError, TypeError):
+            values = np.full(nd, np.nan)
+        spacing = np.ones(nd)
+        for axis, value in enumerate(values):
+            if np.isfinite(value) and value > 0:
+                spacing[axis] = value
+            else:
+                notes.append(
+                    f"spacings {value:g} for axis {'xyz'[axis]} in the NRRD header ignored; "
+                    "using 1; set --spacing"
+                )
+        return spacing, None, notes
     notes.append("no spacing in the file; using 1 (set --spacing)")
     return None, None, notes

@@ -26,6 +26,12 @@ class ReadOptions:
         Raw files: bytes to skip before the samples.
     channel : int or None
         Multi-channel (RGB, multi-sample) images: which channel to read.
+    allow_outside_data : bool
+        Formats with companion files (a detached NRRD header and its data
+        files): read data files that resolve, after following symlinks, outside
+        the header's folder and its sub-folders. Off by default, so that a
+        header from an untrusted source cannot make the tool read any file on
+        the machine.
     """
 
     shape: tuple[int, ...] | None = None
@@ -33,6 +39,7 @@ class ReadOptions:
     endian: str = "little"
     header_bytes: int = 0
     channel: int | None = None
+    allow_outside_data: bool = False
 
     def given(self) -> set[str]:
         """Names of the options that differ from their defaults."""

@@ -101,5 +101,96 @@ def read_raw(path: Path, options: ReadOptions) -> Volume:
         )
     # Mode "c" (copy-on-write) maps the file without reading it and gives a writeable
     # array, which keeps numba to one specialization per dtype; the file is never changed.
-    data = np.memmap(path, dtype=dtype, mode="c", offset=options.header_bytes, shape=shape[::-1])
-    return Volume.from_zyx(np.asarray(data), source=str(path), notes=notes)
+    data = np.asarray(
+        np.memmap(path, dtype=dtype, mode="c", offset=options.header_bytes, shape=shape[::-1])
+    )
+    hint = byte_order_note(data, options.endian)
+    if hint:
+        notes.append(hint)
+    return Volume.from_zyx(data, source=str(path), notes=notes)
+
+
+# Samples looked at to judge the byte order: a few slabs, never the whole file.
+_SAMPLE_LIMIT = 1 << 20
+_SAMPLE_PIECES = 8
+# Floats: magnitudes beyond these (or NaN/inf) are implausible for measured data.
+_FLOAT_HUGE, _FLOAT_TINY = 1e30, 1e-30
+
+
+def _sample_rows(data: np.ndarray) -> np.ndarray:
+    """Up to ``_SAMPLE_LIMIT`` samples as rows along x, from slabs spread over the volume."""
+    width = data.shape[-1]
+    rows = data.reshape(-1, width)  # a view: C order, x last
+    cols = min(width, _SAMPLE_LIMIT)
+    wanted = max(1, _SAMPLE_LIMIT // cols)
+    if wanted >= len(rows):
+        return np.array(rows[:, :cols])
+    run = max(1, wanted // _SAMPLE_PIECES)
+    starts = np.linspace(0, len(rows) - run, _SAMPLE_PIECES).astype(np.int64)
+    return np.concatenate([rows[s : s + run, :cols] for s in starts])
+
+
+def _implausible_floats(values: np.ndarray) -> tuple[float, int]:
+    """Share of the non-zero samples that are NaN, inf, or beyond 1e+-30 in magnitude."""
+    nonzero = values[values != 0]
+    if nonzero.size == 0:
+        return 0.0, 0
+    with np.errstate(all="ignore"):
+        mag = np.abs(nonzero.astype(np.float64))
+        odd = ~np.isfinite(mag) | (mag > _FLOAT_HUGE) | (mag < _FLOAT_TINY)
+    return float(odd.mean()), nonzero.size
+
+
+def _roughness(values: np.ndarray) -> float:
+    """Mean absolute difference of neighbouring samples along x."""
+    return float(np.abs(np.diff(values.astype(np.float64), axis=-1)).mean())
+
+
+def byte_order_note(data: np.ndarray, endian: str) -> str | None:
+    """A note suggesting the other byte order when the samples look byte-swapped.
+
+    Looks at a bounded sample (at most about a million samples from slabs
+    spread over the volume), so a memory-mapped file is barely read. Floats
+    look swapped when many non-zero samples are NaN, infinite or beyond
+    1e+-30 in magnitude while the swapped values are ordinary; 16- and 32-bit
+    integers when the swapped values are far smoother along x (mean absolute
+    difference of neighbours). 1-byte samples have no byte order.
+
+    Parameters
+    ----------
+    data : ndarray
+        The samples in C (z, y, x) order, as read with ``endian``.
+    endian : str
+        The byte order they were read with, "little" or "big".
+
+    Returns
+    -------
+    str or None
+        The note, or None when the values look plausible.
+    """
+    if data.dtype.itemsize == 1 or data.dtype.kind not in "iuf" or data.size < 2:
+        return None
+    other = "big" if endian == "little" else "little"
+    sample = _sample_rows(data)
+    swapped = sample.view(sample.dtype.newbyteorder())  # the same bytes, the other order
+    name = data.dtype.name
+    if data.dtype.kind == "f":
+        odd, count = _implausible_floats(sample)
+        odd_swapped, _ = _implausible_floats(swapped)
+        if count < 16 or odd < 0.05 or odd_swapped > min(0.01, odd / 10):
+            return None
+        return (
+            f"the samples look byte-swapped: {odd:.0%} of the non-zero {name} values are NaN, "
+            f"infinite or beyond 1e+-30 as {endian}-endian, {odd_swapped:.0%} as {other}-endian; "
+            f"if the file is {other}-endian, pass --endian {other}"
+        )
+    if sample.shape[-1] < 2:
+        return None
+    rough, rough_swapped = _roughness(sample), _roughness(swapped)
+    if not rough > 4 * rough_swapped:
+        return None
+    return (
+        f"the samples look byte-swapped: neighbouring {name} values differ by {rough:.3g} on "
+        f"average as {endian}-endian, by {rough_swapped:.3g} as {other}-endian; if the file is "
+        f"{other}-endian, pass --endian {other}"
+    )
