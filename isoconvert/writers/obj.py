@@ -7,13 +7,26 @@ from typing import BinaryIO
 import numpy as np
 
 from ..mesh import Mesh
-from .ply import provenance
+from .header import header_comments
 from .text import write_rows
 
 
 def write_obj(mesh: Mesh, fh: BinaryIO, ascii: bool = True) -> None:
-    """Write an indexed OBJ file (always text; indices are 1-based)."""
-    fh.write("".join(f"# {line}\n" for line in provenance(mesh)).encode("utf-8"))
+    """Write an indexed OBJ file (always text, UTF-8; indices are 1-based).
+
+    Leading ``#`` comments say what made the mesh and record the grid it came
+    from; vertices are written with 17 significant digits (float64 exactly).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        ``vertices (V, 3)``, ``cells (C, 3)`` (``f``) or ``(C, 2)`` (``l``).
+    fh : binary file
+    ascii : bool
+        Ignored (OBJ is text).
+    """
+    comments = header_comments(mesh, ascii=False)
+    fh.write("".join(f"# {line}\n" for line in comments).encode("utf-8"))
     # 17 significant digits: vertices round-trip as float64
     write_rows(fh, np.asarray(mesh.vertices, dtype=np.float64), "v %.17g %.17g %.17g\n")
     cells = np.asarray(mesh.cells) + 1

@@ -7,23 +7,40 @@ from typing import BinaryIO
 import numpy as np
 
 from ..mesh import Mesh
+from .header import header_comments
 from .text import write_rows
 
 
 def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
-    """Write vertices as float32 x, y, z and cells as ``face`` (triangles) or
-    ``edge`` (segments) elements, indices int32."""
-    verts = np.asarray(mesh.vertices, dtype=np.float32)
+    """Write vertices as x, y, z and cells as ``face`` (triangles) or ``edge``
+    (segments) elements, indices int32.
+
+    Coordinates are ``double`` when ``mesh.info["stored_precision"]`` is
+    "float64", else ``float`` (float32); :func:`isoconvert.write_mesh` decides
+    (see :func:`isoconvert.writers.stored_mesh`). The header's comments say
+    what made the mesh and record the grid it came from.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        ``vertices (V, 3)``, ``cells (C, 3)`` or ``(C, 2)``.
+    fh : binary file
+    ascii : bool
+        ``format ascii 1.0`` instead of ``binary_little_endian 1.0``.
+    """
+    double = mesh.info.get("stored_precision") == "float64"
+    verts = np.asarray(mesh.vertices, dtype=np.float64 if double else np.float32)
     cells = np.asarray(mesh.cells)
     triangles = cells.shape[1] == 3
+    kind = "double" if double else "float"
     header = [
         "ply",
         f"format {'ascii' if ascii else 'binary_little_endian'} 1.0",
-        *[f"comment {line}" for line in provenance(mesh)],
+        *[f"comment {line}" for line in header_comments(mesh, ascii=True)],
         f"element vertex {len(verts)}",
-        "property float x",
-        "property float y",
-        "property float z",
+        f"property {kind} x",
+        f"property {kind} y",
+        f"property {kind} z",
     ]
     if triangles:
         header += [f"element face {len(cells)}", "property list uchar int vertex_indices"]
@@ -31,10 +48,12 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
         header += [f"element edge {len(cells)}", "property int vertex1", "property int vertex2"]
     fh.write(("\n".join(header) + "\nend_header\n").encode("ascii"))
     if ascii:
-        write_rows(fh, verts, "%.9g %.9g %.9g\n")
+        # 17 significant digits give a double back exactly, 9 a float
+        digits = 17 if double else 9
+        write_rows(fh, verts, f"%.{digits}g %.{digits}g %.{digits}g\n")
         write_rows(fh, cells, "3 %d %d %d\n" if triangles else "%d %d\n")
         return
-    fh.write(verts.astype("<f4", copy=False).tobytes())
+    fh.write(verts.astype("<f8" if double else "<f4", copy=False).tobytes())
     if triangles:
         record = np.empty(len(cells), dtype=[("n", "u1"), ("v", "<i4", (3,))])
         record["n"] = 3
@@ -42,18 +61,3 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
         fh.write(record.tobytes())
     else:
         fh.write(cells.astype("<i4").tobytes())
-
-
-def provenance(mesh: Mesh) -> list[str]:
-    """Comment lines saying what made the mesh."""
-    info = mesh.info
-    if not info:
-        return ["made by isoconvert"]
-    from .. import __version__
-
-    lines = [f"made by isoconvert {__version__}"]
-    if "source" in info:
-        lines.append(f"source {info['source']}")
-    if "method" in info:
-        lines.append(f"method {info['method']} level {info.get('level', '?'):.17g}")
-    return lines

@@ -8,21 +8,37 @@ import numpy as np
 
 from ..errors import FormatError
 from ..mesh import Mesh
+from .header import escape_comment
 from .text import write_rows
+
+#: The name on an ASCII STL's ``solid`` line (escaped like every header text).
+SOLID_NAME = "isoconvert"
 
 
 def write_stl(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
-    """Write each triangle with its own three vertices and unit normal.
+    """Write each triangle with its own three vertices and unit normal, float32.
 
     Zero-area triangles get a zero normal rather than NaN (cf. scikit-image
-    PR #4872, where NaN normals broke slicers).
+    PR #4872, where NaN normals broke slicers). :func:`isoconvert.write_mesh`
+    passes the mesh as :func:`~isoconvert.writers.stored_mesh` gives it (three
+    float32-rounded vertices per triangle), so the normals are those of the
+    triangles the file holds.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        ``vertices (V, 3)``, ``cells (C, 3)``.
+    fh : binary file
+    ascii : bool
+        ``solid ... endsolid`` text instead of binary records.
     """
     if not mesh.is_triangles:
         raise FormatError("STL holds triangles only; write contours as OBJ or PLY")
     normals = mesh.triangle_normals().astype(np.float32)
     corners = np.asarray(mesh.vertices, dtype=np.float32)[mesh.cells]  # (C, 3, 3)
     if ascii:
-        fh.write(b"solid isoconvert\n")
+        solid = escape_comment(SOLID_NAME, ascii=True)
+        fh.write(f"solid {solid}\n".encode("ascii"))
         rows = np.concatenate([normals, corners.reshape(-1, 9)], axis=1)
         facet = (
             "facet normal %.9g %.9g %.9g\n outer loop\n"
@@ -30,7 +46,7 @@ def write_stl(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
             + " endloop\nendfacet\n"
         )
         write_rows(fh, rows, facet)
-        fh.write(b"endsolid isoconvert\n")
+        fh.write(f"endsolid {solid}\n".encode("ascii"))
         return
     header = b"binary STL written by isoconvert"
     fh.write(header.ljust(80, b" "))

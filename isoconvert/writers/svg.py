@@ -8,10 +8,23 @@ import numpy as np
 
 from ..errors import FormatError
 from ..mesh import Mesh, polylines
+from .header import escape_comment
 
 
 def write_svg(mesh: Mesh, fh: BinaryIO, ascii: bool = True) -> None:
-    """Draw 2D contour segments; x to the right, y down (as images are shown)."""
+    """Draw 2D contour segments; x to the right, y down (as images are shown).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        ``vertices (V, 3)`` in one plane of constant z, ``cells (C, 2)``.
+    fh : binary file
+        Receives UTF-8 XML; the comment naming the level and the source is
+        escaped (:func:`~isoconvert.writers.header.escape_comment`) so that it
+        stays a valid XML comment whatever the source path holds.
+    ascii : bool
+        Ignored (SVG is text).
+    """
     if mesh.is_triangles:
         raise FormatError("SVG draws 2D contours; write surfaces as PLY, OBJ or STL")
     v = np.asarray(mesh.vertices, dtype=np.float64)
@@ -25,14 +38,17 @@ def write_svg(mesh: Mesh, fh: BinaryIO, ascii: bool = True) -> None:
     size = np.maximum(hi - lo, 1e-9)
     pad = 0.02 * size.max()
     stroke = 0.003 * size.max()
+    note = escape_comment(
+        f"isoconvert: level {mesh.info.get('level', '?')} source {mesh.info.get('source', '?')}",
+        xml=True,
+    )
     fh.write(
         (
             '<?xml version="1.0" encoding="UTF-8"?>\n'
             f'<svg xmlns="http://www.w3.org/2000/svg" '
             f'viewBox="{lo[0] - pad:.6g} {lo[1] - pad:.6g} {size[0] + 2 * pad:.6g} '
             f'{size[1] + 2 * pad:.6g}">\n'
-            f"<!-- isoconvert: level {mesh.info.get('level', '?')} "
-            f"source {mesh.info.get('source', '?')} -->\n"
+            f"<!-- {note} -->\n"
             f'<g fill="none" stroke="black" stroke-width="{stroke:.4g}" '
             'stroke-linejoin="round" stroke-linecap="round">\n'
         ).encode()
