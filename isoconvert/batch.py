@@ -11,16 +11,19 @@ import fnmatch
 import glob as globlib
 import io
 import json
+import logging
 import os
 import time
 import tomllib
+import warnings
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from .errors import InputNotFoundError, IsoconvertError
+from .convert import ConvertOptions
+from .errors import InputNotFoundError, IsoconvertError, OutputError
 from .readers import READERS
 from .readers.tiff import TIFF_SUFFIXES, natural_key
 
@@ -42,8 +45,24 @@ class Found:
 
 @dataclass
 class Skipped:
+    """An input file (or a folder of them, ``files`` > 1) that is not converted, and why."""
+
     path: str
     reason: str
+    files: int = 1
+
+
+class NoVolumesError(InputNotFoundError):
+    """The inputs of a batch hold no volume to convert (every file was skipped)."""
+
+    def __init__(self, inputs: list[str], skipped: list[Skipped]) -> None:
+        self.inputs = list(inputs)
+        self.skipped = list(skipped)
+        super().__init__(no_volumes_message(inputs, skipped))
+
+
+class BatchOptionError(IsoconvertError):
+    """A batch setting (the number of worker processes) cannot be used."""
 
 
 @dataclass
@@ -74,17 +93,52 @@ class Outcome:
 
 # --- discovery --------------------------------------------------------------------------
 
+#: Why a 2D image is not converted by a batch unless asked for.
+IMAGE_REASON = "a 2D image; pass --images to contour 2D images"
+#: Why a file of no known format is not converted.
+UNKNOWN_REASON = "not a volume format isoconvert reads"
+_DICOM_SUFFIXES = (".dcm", ".dicom")
+
 
 def discover(
-    inputs: list[str], recursive: bool = False, exclude: Path | None = None
+    inputs: list[str],
+    recursive: bool = False,
+    exclude: Path | None = None,
+    images: bool = False,
 ) -> tuple[list[Found], list[Skipped]]:
     """Find the volumes in files, folders and globs.
 
     A folder holding only single-image TIFF slices of one shape is one volume
     (a stack); a ``.nhdr`` header and the data files it names count once;
-    files of unknown formats are skipped with a reason. Symbolic links to
-    folders are followed once (a loop is cut where it closes). ``exclude`` (the
-    output folder) is never searched.
+    files of unknown formats are skipped with a reason, those of formats not
+    read yet (NIfTI, MetaImage, DICOM) with what
+    ``readers.unsupported_format`` says, and the DICOM files of a folder
+    holding no volume as one item. Symbolic links to folders are followed once
+    (a loop is cut where it closes); a file reached twice is converted once.
+    ``exclude`` (the output folder) is never searched.
+
+    Parameters
+    ----------
+    inputs : list of str
+        Files, folders and glob patterns.
+    recursive : bool
+        Search sub-folders of folders (and ``**`` in globs).
+    exclude : Path or None
+        A folder never searched (the output folder).
+    images : bool
+        Keep 2D images. Without it, image files (the ``image`` reader's
+        suffixes), single-page 2D TIFFs that form no slice stack and 2D NRRD
+        files are skipped with :data:`IMAGE_REASON` (from their headers only).
+
+    Returns
+    -------
+    found : list of Found
+    skipped : list of Skipped
+
+    Raises
+    ------
+    InputNotFoundError
+        An input does not exist, or a pattern matches nothing.
     """
     found: list[Found] = []
     skipped: list[Skipped] = []
@@ -92,9 +146,9 @@ def discover(
     for spec in inputs:
         path = Path(spec)
         if path.is_file():
-            _add_files([path], path.parent, found, skipped)
+            _add_files([path], path.parent, found, skipped, images)
         elif path.is_dir():
-            _walk(path, recursive, excluded, found, skipped)
+            _walk(path, recursive, excluded, found, skipped, images)
         elif globlib.has_magic(spec):
             matches = sorted(
                 globlib.glob(spec, recursive=recursive), key=lambda p: natural_key(Path(p))
@@ -103,16 +157,74 @@ def discover(
                 raise InputNotFoundError(f"{spec}: the pattern matches nothing")
             files = [Path(m) for m in matches if Path(m).is_file()]
             root = Path(os.path.commonpath([str(Path(m).parent) for m in matches]))
-            _add_files(files, root, found, skipped)
+            _add_files(files, root, found, skipped, images)
             for m in matches:
                 if Path(m).is_dir():
-                    _walk(Path(m), recursive, excluded, found, skipped)
+                    _walk(Path(m), recursive, excluded, found, skipped, images)
         else:
             raise InputNotFoundError(f"{spec}: no such file, folder or pattern")
-    return found, skipped
+    return _once(found, skipped), skipped
 
 
-def _walk(root: Path, recursive: bool, excluded, found, skipped) -> None:
+def _once(found: list[Found], skipped: list[Skipped]) -> list[Found]:
+    """Each volume once, however many inputs (or ``..`` paths, or links) reach it."""
+    first: dict[str, Found] = {}
+    for f in found:
+        key = os.path.realpath(f.spec)
+        if key not in first:
+            first[key] = f
+        elif f.spec != first[key].spec:
+            skipped.append(Skipped(f.spec, f"the same file as {first[key].spec}; converted once"))
+    return list(first.values())
+
+
+def no_volumes_message(inputs: list[str], skipped: list[Skipped]) -> str:
+    """``no volumes found in INPUTS (N files skipped: ...)``, the reasons counted.
+
+    Parameters
+    ----------
+    inputs : list of str
+        The batch's inputs, as given.
+    skipped : list of Skipped
+        What discovery skipped.
+
+    Returns
+    -------
+    str
+        One line.
+    """
+    total = sum(s.files for s in skipped)
+    by_reason: dict[str, int] = {}
+    for s in skipped:
+        by_reason[s.reason] = by_reason.get(s.reason, 0) + s.files
+    if not by_reason:
+        detail = "no files"
+    elif len(by_reason) == 1:
+        (reason,) = by_reason
+        detail = f"{total} file{'s' if total != 1 else ''} skipped: {reason}"
+    else:
+        common = sorted(by_reason.items(), key=lambda item: -item[1])
+        listed = " | ".join(
+            f"{n} file{'s' if n != 1 else ''}: {reason}" for reason, n in common[:4]
+        )
+        more = f" | {len(common) - 4} other reasons" if len(common) > 4 else ""
+        detail = f"{total} files skipped: {listed}{more}"
+    return f"no volumes found in {' '.join(inputs)} ({detail})"
+
+
+def check_found(inputs: list[str], found: list[Found], skipped: list[Skipped]) -> None:
+    """Fail when discovery found no volume to convert.
+
+    Raises
+    ------
+    NoVolumesError
+        ``found`` is empty; the message is :func:`no_volumes_message`.
+    """
+    if not found:
+        raise NoVolumesError(inputs, skipped)
+
+
+def _walk(root: Path, recursive: bool, excluded, found, skipped, images: bool) -> None:
     seen: set[str] = set()
     for folder, dirs, files in os.walk(root, followlinks=True):
         real = os.path.realpath(folder)
@@ -132,7 +244,7 @@ def _walk(root: Path, recursive: bool, excluded, found, skipped) -> None:
             name = rel if str(rel) != "." else Path(root.resolve().name)
             found.append(Found(folder, name, sum(p.stat().st_size for p in stack)))
             paths = [p for p in paths if p not in stack]
-        _add_files(paths, root, found, skipped)
+        _add_files(paths, root, found, skipped, images)
 
 
 def _tiff_stack(paths: list[Path]) -> list[Path]:
@@ -155,53 +267,140 @@ def _tiff_stack(paths: list[Path]) -> list[Path]:
     return tiffs if len(shapes) == 1 else []
 
 
-def _add_files(paths: list[Path], root: Path, found, skipped) -> None:
-    # data files named by a detached header beside them are read through it
+def _add_files(paths: list[Path], root: Path, found, skipped, images: bool = False) -> None:
+    # data files named by a header beside them (.nhdr, .mhd) are read through it
     consumed: dict[Path, Path] = {}
     for folder in {p.parent for p in paths}:
         for header in folder.glob("*.nhdr"):
             consumed.update({data: header for data in _nhdr_data_files(header)})
+        for header in folder.glob("*.[mM][hH][dD]"):
+            consumed.update({data: header for data in _mhd_data_files(header)})
+    given = {q.resolve() for q in paths}
+    dicom: dict[Path, list[tuple[Path, str | None]]] = {}  # folder: DICOM files, why
+    start = len(found)
     for p in paths:
         header = consumed.get(p.resolve())
         if header is not None:
-            if header.resolve() not in {q.resolve() for q in paths}:
+            if header.resolve() in given:
+                continue  # read through its header, or skipped with it
+            if READERS.by_suffix(header.suffix) is not None:
                 skipped.append(Skipped(str(p), f"the data of {header.name}; convert that header"))
-            continue
+                continue
+            # the header's format is not read yet: the file may still be read as raw
         match = READERS.by_suffix(p.suffix)
         if match is None:
-            skipped.append(Skipped(str(p), "not a volume format isoconvert reads"))
+            reason = _unsupported(p)
+            if _is_dicom(p):
+                dicom.setdefault(p.parent, []).append((p, reason))
+            else:
+                skipped.append(Skipped(str(p), reason or UNKNOWN_REASON))
+            continue
+        if not images and _is_2d_image(p, match[0]):
+            skipped.append(Skipped(str(p), IMAGE_REASON))
             continue
         try:
             rel = p.relative_to(root)
         except ValueError:
             rel = Path(p.name)
         found.append(Found(str(p), rel, _sample_bytes(p)))
+    with_volumes = {Path(f.spec).parent for f in found[start:]}
+    for folder, files in dicom.items():
+        if len(files) > 1 and folder not in with_volumes:
+            # a DICOM series: one item, not one per slice
+            why = files[0][1] or "DICOM is not read yet"
+            reason = f"a DICOM series of {len(files)} files; {why}"
+            skipped.append(Skipped(str(folder), reason, files=len(files)))
+        else:
+            skipped.extend(Skipped(str(p), reason or UNKNOWN_REASON) for p, reason in files)
+
+
+def _unsupported(path: Path) -> str | None:
+    """Why a file of a known format isoconvert does not read yet is skipped, if it is one.
+
+    What ``readers.unsupported_format`` says, without the path it starts with
+    (the summary names the file, and files of one kind then share one reason);
+    where that function is absent, None (the file is of an unknown format).
+    """
+    from . import readers
+
+    check = getattr(readers, "unsupported_format", None)
+    if check is None:
+        return None
+    try:
+        reason = check(path)
+    except OSError:  # unreadable: its conversion would fail anyway, say so there
+        return None
+    if reason:
+        reason = reason.removeprefix(f"{path}: ")
+    return reason or None
+
+
+def _is_dicom(path: Path) -> bool:
+    """A DICOM file: its suffix, or the ``DICM`` mark after the 128-byte preamble."""
+    if path.suffix.lower() in _DICOM_SUFFIXES:
+        return True
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(132)[128:] == b"DICM"
+    except OSError:
+        return False
+
+
+def _is_2d_image(path: Path, reader: str) -> bool:
+    """Whether a file the ``reader`` reads holds a 2D image (from its header only).
+
+    Unreadable headers count as not 2D: the conversion then says what is wrong.
+    """
+    if reader == "image":
+        return True
+    try:
+        if reader == "tiff":
+            import tifffile
+
+            with tifffile.TiffFile(path) as tif:
+                series = tif.series[0]
+                axes = [
+                    a for a, n in zip(series.axes, series.shape, strict=True) if n > 1 or a in "XY"
+                ]
+            # as the reader: singleton axes dropped, then one channel axis
+            return len(axes) - any(a in "CS" for a in axes) == 2
+        if reader == "nrrd":
+            import nrrd
+
+            header = nrrd.read_header(str(path))
+            kinds = header.get("kinds")
+            if kinds is None:
+                kinds = ["domain"] * int(header["dimension"])
+            return sum(k in ("domain", "space", "time") for k in kinds) == 2
+    except Exception:  # pynrrd and tifffile raise many kinds on a bad header
+        return False
+    return False
+
+
+def _mhd_data_files(header: Path) -> set[Path]:
+    """The data file a MetaImage header names (``ElementDataFile = name``), if one."""
+    try:
+        with open(header, "rb") as fh:
+            text = fh.read(64 * 1024).decode("utf-8", errors="replace")
+    except OSError:
+        return set()
+    for line in text.splitlines():
+        key, _, value = line.partition("=")
+        if key.strip() == "ElementDataFile":
+            value = value.strip()
+            if not value or value.upper() == "LOCAL" or value.upper().startswith("LIST"):
+                return set()
+            if "%" in value:
+                return set()  # a numbered set: left to each file's own reason
+            return {(header.parent / value).resolve()}
+    return set()
 
 
 def _nhdr_data_files(header: Path) -> set[Path]:
-    """Files a detached NRRD header names as its data (one file or a numbered set)."""
-    try:
-        import nrrd
+    """Files a detached NRRD header names as its data (one, numbered, or a LIST)."""
+    from .readers.nrrd import detached_data_files
 
-        value = str(nrrd.read_header(str(header)).get("data file", ""))
-    except Exception:
-        return set()
-    from .readers.nrrd import _MULTI_FILE
-
-    multi = _MULTI_FILE.match(value)
-    if multi:
-        fmt, lo, hi, step = (
-            multi.group(1),
-            int(multi.group(2)),
-            int(multi.group(3)),
-            int(multi.group(4)),
-        )
-        if step == 0:
-            return set()
-        names = [fmt % n for n in range(lo, hi + (1 if step > 0 else -1), step)]
-    else:
-        names = [value] if value and not value.startswith("LIST") else []
-    return {(header.parent / n).resolve() for n in names}
+    return set(detached_data_files(header))
 
 
 def _sample_bytes(path: Path) -> int:
@@ -328,17 +527,25 @@ def plan(
 
     Output names mirror the input paths under ``out_dir`` with ``suffix``. Two
     inputs that would give the same name (``a.nrrd`` and ``a.tif``) keep their
-    input suffix in it (``a.nrrd.ply``, ``a.tif.ply``).
+    input suffix in it (``a.nrrd.ply``, ``a.tif.ply``). Names never leave
+    ``out_dir``: a relative path that would (``..`` parts, an absolute path, a
+    link out of it) gives way to the input's own name, at the top of
+    ``out_dir``; a name still taken gets a number (``x-2.ply``).
     """
+    out_dir = Path(out_dir)
+    base = out_dir.resolve()
+    relatives = [_inside(base, f.relative) or _fallback_name(f) for f in found]
     names = [
-        f.relative.with_suffix(suffix) if f.relative.suffix else Path(str(f.relative) + suffix)
-        for f in found
+        rel.with_suffix(suffix) if rel.suffix else Path(str(rel) + suffix) for rel in relatives
     ]
     clashes = {n for n in names if names.count(n) > 1}
+    taken: set[Path] = set()
     jobs, done = [], []
-    for f, name in zip(found, names, strict=True):
+    for f, rel, name in zip(found, relatives, names, strict=True):
         if name in clashes:
-            name = Path(str(f.relative) + suffix)
+            name = Path(str(rel) + suffix)
+        name = _unique(name, taken)
+        taken.add(name)
         output = out_dir / name
         rule = next((r for r in rules or [] if r.matches(f.relative)), None)
         job_level = rule.level if rule and rule.level is not None else level
@@ -377,15 +584,124 @@ def plan(
     return jobs, done
 
 
+def _inside(base: Path, relative: Path) -> Path | None:
+    """``relative`` normalised, or None where ``base / relative`` would leave ``base``
+    (the output folder, resolved)."""
+    text = os.path.normpath(str(relative))
+    rel = Path(text)
+    if rel.is_absolute() or rel.drive or rel.anchor or not rel.name or rel.parts[0] == "..":
+        return None
+    if text in (".", "") or any(part in ("", ".", "..") for part in rel.parts):
+        return None
+    if not (base / rel).resolve().is_relative_to(base):  # a link inside base leading out
+        return None
+    return rel
+
+
+def _fallback_name(found: Found) -> Path:
+    """A plain file name for ``found``, for the top of the output folder."""
+    for name in (Path(found.spec).name, Path(os.path.abspath(found.spec)).name):
+        if name not in ("", ".", ".."):
+            return Path(name)
+    return Path("volume")
+
+
+def _unique(name: Path, taken: set[Path]) -> Path:
+    """``name``, or ``stem-2.ext``, ``stem-3.ext``, ... where it is taken."""
+    n = 2
+    candidate = name
+    while candidate in taken:
+        candidate = name.with_name(f"{name.stem}-{n}{name.suffix}")
+        n += 1
+    return candidate
+
+
+# --- output folders -----------------------------------------------------------------------------
+
+
+def make_folders(folder: str | Path) -> list[Path]:
+    """Create ``folder`` and its missing parents; return those this call created.
+
+    Parameters
+    ----------
+    folder : str or Path
+
+    Returns
+    -------
+    list of Path
+        The folders created, outermost first (empty when ``folder`` existed).
+        A folder another process creates at the same moment is not included.
+
+    Raises
+    ------
+    OutputError
+        A part of the path is a file, or a folder cannot be created.
+    """
+    folder = Path(folder)
+    missing = []
+    part = folder
+    while not part.exists() and not part.is_symlink() and part.parent != part:
+        missing.append(part)
+        part = part.parent
+    if missing and not part.is_dir():
+        raise OutputError(f"{part}: exists and is not a folder; choose another -o")
+    created: list[Path] = []
+    for part in reversed(missing):
+        try:
+            part.mkdir()
+        except FileExistsError:
+            continue  # made meanwhile by someone else: not ours to remove
+        except OSError as exc:
+            remove_empty_folders(created)
+            raise OutputError(
+                f"{part}: cannot create the output folder ({exc.strerror or exc}); "
+                "choose another -o"
+            ) from None
+        created.append(part)
+    if not folder.is_dir():
+        remove_empty_folders(created)
+        raise OutputError(f"{folder}: exists and is not a folder; choose another -o")
+    return created
+
+
+def remove_empty_folders(created: list[Path]) -> None:
+    """Remove the folders of ``created`` that are empty, innermost first.
+
+    Parameters
+    ----------
+    created : list of Path
+        Folders as :func:`make_folders` returns them (outermost first). A folder
+        that is not empty stays, and so do those holding it.
+    """
+    for folder in sorted(created, key=lambda f: len(Path(f).parts), reverse=True):
+        try:
+            Path(folder).rmdir()
+        except OSError:  # not empty, gone already, or not ours to remove: leave it
+            continue
+
+
 # --- running ------------------------------------------------------------------------------------
 
 
-def run_one(job: Job, settings: dict) -> Outcome:
-    """Convert one volume; every failure becomes an outcome, never an exception.
+@dataclass(frozen=True)
+class BatchSettings:
+    """What applies to every file of a batch.
 
-    ``settings`` holds what applies to all files: convert() keyword arguments
-    and ``require`` (check names).
+    Attributes
+    ----------
+    options : ConvertOptions
+        How to read, extract and write; a job's own options (from a level
+        mapping or the raw layout) are applied on top.
+    require : tuple of str
+        Checks each mesh must pass (``--require``).
     """
+
+    options: ConvertOptions = field(default_factory=ConvertOptions)
+    require: tuple[str, ...] = ()
+
+
+def run_one(job: Job, settings: BatchSettings) -> Outcome:
+    """Convert one volume; every failure becomes an outcome, never an exception."""
     from .convert import convert
     from .report import check_mesh
 
@@ -396,15 +712,16 @@ def run_one(job: Job, settings: dict) -> Outcome:
             job.input, job.output, "failed", seconds=time.perf_counter() - start, message=message
         )
 
-    options = dict(job.options)
-    flip = options.pop("flip", settings.get("flip", False))
-    require = settings.get("require") or []
-    kwargs = {k: v for k, v in settings.items() if k not in ("require", "flip")}
+    require = list(settings.require)
+    created: list[Path] = []
     try:
-        Path(job.output).parent.mkdir(parents=True, exist_ok=True)
-        result = convert(
-            job.input, job.output, job.level, flip=flip, force=True, **kwargs, **options
-        )
+        options = settings.options.updated(force=True, **job.options)
+        created = make_folders(Path(job.output).parent)
+        try:
+            result = convert(job.input, job.output, job.level, options)
+        except BaseException:
+            remove_empty_folders(created)  # a failed file leaves no empty folder behind
+            raise
     except IsoconvertError as exc:
         return failed(str(exc))
     except MemoryError:
@@ -421,7 +738,7 @@ def run_one(job: Job, settings: dict) -> Outcome:
         cells=mesh.n_cells,
     )
     if require:
-        report = check_mesh(mesh, source=job.output)
+        report = check_mesh(result.written, source=job.output, grid=mesh.info.get("grid"))
         outcome.checks = {name: report.checks[name] for name in require}
         failed = report.failures(require)
         if failed:
@@ -431,14 +748,14 @@ def run_one(job: Job, settings: dict) -> Outcome:
     return outcome
 
 
-def _run_one_dict(job: dict, settings: dict) -> dict:
+def _run_one_dict(job: dict, settings: BatchSettings) -> dict:
     """Pickle-friendly wrapper for worker processes."""
     return asdict(run_one(Job(**job), settings))
 
 
 def run_jobs(
     jobs: list[Job],
-    settings: dict,
+    settings: BatchSettings,
     workers: int = 1,
     max_memory: int | None = None,
     on_done: Callable[[Outcome], None] | None = None,
@@ -452,6 +769,10 @@ def run_jobs(
     for the rest. On
     KeyboardInterrupt, jobs not finished are reported as interrupted (their
     outputs are written atomically, so none is left half-written).
+
+    Output sub-folders are created as jobs start; those left empty by failed
+    jobs are removed (with worker processes, by this process, once no running
+    job writes there). Worker processes run :func:`silence_third_party` first.
     """
     outcomes: list[Outcome] = []
 
@@ -475,52 +796,79 @@ def run_jobs(
     budget = max_memory or (1 << 62)
     pending = list(jobs)
     context = multiprocessing.get_context("spawn")  # no fork of a threaded parent
-    while pending:
-        running: dict = {}
-        used = 0
-        try:
-            with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-                while pending or running:
-                    while pending and len(running) < workers:
-                        job = pending[0]
-                        if running and used + job.estimate > budget:
-                            break
-                        pending.pop(0)
-                        running[pool.submit(_run_one_dict, asdict(job), settings)] = job
-                        used += job.estimate
-                    finished, _ = wait(running, return_when=FIRST_COMPLETED)
-                    for future in finished:
-                        job = running[future]  # stays there if the pool broke: retried alone
-                        try:
-                            result = Outcome(**future.result())
-                        except BrokenProcessPool:
-                            raise
-                        except Exception as exc:
-                            result = Outcome(
-                                job.input,
-                                job.output,
-                                "failed",
-                                message=f"{job.input}: {type(exc).__name__}: {exc}",
-                            )
-                        del running[future]
-                        used -= job.estimate
-                        done(result)
-        except BrokenProcessPool:
-            # A dead worker breaks the whole pool, and with it the jobs beside it.
-            # Run each of those alone: only the one that kills its worker fails.
-            for job in running.values():
-                done(_run_alone(job, settings, context))
-        except KeyboardInterrupt:
-            for job in [*running.values(), *pending]:
-                done(Outcome(job.input, job.output, "interrupted", message="interrupted"))
-            raise
+    # Folders are made here, not in the workers: a worker removing the empty folder
+    # of its failed file could otherwise pull it from under a neighbour writing there.
+    made: list[Path] = []
+
+    def tidy(busy) -> None:
+        writing = [Path(j.output).parent for j in busy]
+        remove_empty_folders(
+            [f for f in made if not any(w == f or w.is_relative_to(f) for w in writing)]
+        )
+        made[:] = [f for f in made if f.is_dir()]
+
+    try:
+        while pending:
+            running: dict = {}
+            used = 0
+            try:
+                with ProcessPoolExecutor(
+                    max_workers=workers, mp_context=context, initializer=silence_third_party
+                ) as pool:
+                    while pending or running:
+                        while pending and len(running) < workers:
+                            job = pending[0]
+                            if running and used + job.estimate > budget:
+                                break
+                            pending.pop(0)
+                            try:
+                                made.extend(make_folders(Path(job.output).parent))
+                            except IsoconvertError as exc:
+                                done(Outcome(job.input, job.output, "failed", message=str(exc)))
+                                continue
+                            running[pool.submit(_run_one_dict, asdict(job), settings)] = job
+                            used += job.estimate
+                        if not running:
+                            continue
+                        finished, _ = wait(running, return_when=FIRST_COMPLETED)
+                        for future in finished:
+                            job = running[future]  # stays there if the pool broke: retried
+                            try:
+                                result = Outcome(**future.result())
+                            except BrokenProcessPool:
+                                raise
+                            except Exception as exc:
+                                result = Outcome(
+                                    job.input,
+                                    job.output,
+                                    "failed",
+                                    message=f"{job.input}: {type(exc).__name__}: {exc}",
+                                )
+                            del running[future]
+                            used -= job.estimate
+                            if result.status == "failed":
+                                tidy(running.values())
+                            done(result)
+            except BrokenProcessPool:
+                # A dead worker breaks the whole pool, and with it the jobs beside it.
+                # Run each of those alone: only the one that kills its worker fails.
+                for job in running.values():
+                    done(_run_alone(job, settings, context))
+            except KeyboardInterrupt:
+                for job in [*running.values(), *pending]:
+                    done(Outcome(job.input, job.output, "interrupted", message="interrupted"))
+                raise
+    finally:
+        tidy([])
     return outcomes
 
 
-def _run_alone(job: Job, settings: dict, context) -> Outcome:
+def _run_alone(job: Job, settings: BatchSettings, context) -> Outcome:
     """Run one job in a worker of its own; a worker that dies fails only this job."""
     try:
-        with ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
+        with ProcessPoolExecutor(
+            max_workers=1, mp_context=context, initializer=silence_third_party
+        ) as pool:
             return Outcome(**pool.submit(_run_one_dict, asdict(job), settings).result())
     except BrokenProcessPool:
         return Outcome(
@@ -530,6 +878,71 @@ def _run_alone(job: Job, settings: dict, context) -> Outcome:
             message=f"{job.input}: the worker process died (out of memory?); "
             "convert it alone or lower --jobs",
         )
+
+
+def check_jobs(jobs: int | None, files: int | None = None) -> int:
+    """The number of worker processes for ``--jobs``.
+
+    Parameters
+    ----------
+    jobs : int or None
+        What the user asked for; None means one per core.
+    files : int or None
+        The number of files to convert, if known: no more workers than files.
+
+    Returns
+    -------
+    int
+        At least 1.
+
+    Raises
+    ------
+    BatchOptionError
+        ``jobs`` is 0 or negative.
+    """
+    if jobs is not None and jobs < 1:
+        raise BatchOptionError(
+            f"--jobs must be 1 or more (worker processes), got {jobs}; "
+            "leave it out to use one per core"
+        )
+    count = jobs if jobs is not None else (os.cpu_count() or 1)
+    if files is not None:
+        count = min(count, max(files, 1))
+    return max(count, 1)
+
+
+#: Messages numpy warns with that mean nothing to a batch user (NaN, overflow,
+#: empty slices are handled or reported by isoconvert itself).
+_NUMPY_MESSAGES = (
+    r".*encountered in",  # divide by zero / overflow / invalid value / underflow
+    r"Mean of empty slice",
+    r"Degrees of freedom <= 0",
+    r"All-NaN (slice|axis) encountered",
+)
+
+
+def silence_third_party() -> None:
+    """Keep numpy's warnings and tifffile's log lines off stderr, in this process.
+
+    Ignores warnings raised inside numpy, numpy's own warning classes and its
+    floating-point RuntimeWarnings (raised at the caller's line), and gives the
+    ``tifffile`` logger a handler that drops everything (not passed on to the
+    root logger). Called in every batch worker process; the CLI calls it too.
+    Safe to call more than once.
+    """
+    import numpy as np
+
+    warnings.filterwarnings("ignore", module=r"numpy(\.|$)")
+    for name in ("ComplexWarning", "VisibleDeprecationWarning", "RankWarning"):
+        category = getattr(np.exceptions, name, None)
+        if category is not None:
+            warnings.filterwarnings("ignore", category=category)
+    for message in _NUMPY_MESSAGES:
+        warnings.filterwarnings("ignore", message=message, category=RuntimeWarning)
+    log = logging.getLogger("tifffile")
+    if not any(isinstance(h, logging.NullHandler) for h in log.handlers):
+        log.addHandler(logging.NullHandler())
+    log.propagate = False
 
 
 # --- summary ----------------------------------------------------------------------------------

@@ -8,7 +8,6 @@ stderr), 2 a usage error, 3 an internal error (a bug), 4 a check named by
 from __future__ import annotations
 
 import json
-import os
 import sys
 import time
 from contextlib import contextmanager
@@ -351,7 +350,12 @@ def convert(
     if report is not None or required:
         from .report import check_mesh
 
-        checked = check_mesh(result.mesh, examples=examples, source=str(result.output))
+        checked = check_mesh(
+            result.written,
+            examples=examples,
+            source=str(result.output),
+            grid=result.mesh.info.get("grid"),
+        )
         _emit_report(checked, report, required, as_json=False, force=force, quiet=quiet)
 
 
@@ -478,6 +482,15 @@ def batch(
     endian: EndianOpt = Endian.little,
     header_bytes: HeaderBytesOpt = 0,
     spacing: SpacingOpt = None,
+    allow_outside_data: AllowOutsideOpt = False,
+    images: Annotated[
+        bool,
+        _flag(
+            "--images",
+            help="Also contour 2D images (PNG, JPEG, 2D TIFF and NRRD); skipped otherwise "
+            "(implied by --method squares).",
+        ),
+    ] = False,
 ) -> None:
     """Convert many volumes: files, folders (--recursive) and globs, in parallel."""
     from . import batch as batching
@@ -486,6 +499,7 @@ def batch(
 
     required = parse_requirements(require)
     writer = WRITERS.get(format)
+    batching.check_jobs(jobs)
     if level is None and levels is None:
         raise VolumeError("batch needs --level (a number or auto) or --levels FILE")
     if out_dir.exists() and not out_dir.is_dir():
@@ -496,9 +510,14 @@ def batch(
         if summary.exists() and not (force or skip_existing):
             raise VolumeError(f"{summary}: already exists; pass --force to overwrite it")
     rules = batching.read_mapping(levels) if levels else None
-    found, skipped = batching.discover(inputs, recursive=recursive, exclude=out_dir)
+    found, skipped = batching.discover(
+        inputs, recursive=recursive, exclude=out_dir, images=images or method == "squares"
+    )
+    batching.check_found(inputs, found, skipped)
     numeric_level = None if level is None else (level if level == "auto" else _level(level))
     common = {"spacing": _numbers(spacing, "--spacing")} if spacing else {}
+    if allow_outside_data:
+        common["allow_outside_data"] = True
     raw = {
         "shape": _numbers(shape, "--shape", int),
         "dtype": dtype,
@@ -518,28 +537,34 @@ def batch(
     )
     for item in skipped:
         outcomes.append(batching.Outcome(item.path, "", "skipped", message=item.reason))
-    settings = {
-        "format": writer.name,
-        "ascii": ascii,
-        "flip": flip,
-        "method": method,
-        "vertex_offset": _vertex_offset(no_degenerate, exact_placement),
-        "require": required,
-    }
-    if work:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    workers = max(1, min(jobs or os.cpu_count() or 1, len(work) or 1))
-    with _batch_display(quiet, len(work), verbose) as on_done:
-        try:
-            outcomes += batching.run_jobs(work, settings, workers, budget, on_done)
-        except KeyboardInterrupt:
-            raise typer.Exit(130) from None  # main() says so
-    outcomes.sort(key=lambda o: natural_text_key(o.input))
-    if summary is not None:
-        from .atomic import atomic_output
+    from .convert import ConvertOptions
 
-        with atomic_output(summary, force=True) as fh:
-            fh.write(batching.summary_bytes(outcomes, summary.suffix.lower()))
+    settings = batching.BatchSettings(
+        ConvertOptions(
+            format=writer.name,
+            ascii=ascii,
+            flip=flip,
+            method=method,
+            vertex_offset=_vertex_offset(no_degenerate, exact_placement),
+        ),
+        tuple(required),
+    )
+    workers = batching.check_jobs(jobs, files=len(work))
+    created = batching.make_folders(out_dir) if work else []
+    try:
+        with _batch_display(quiet, len(work), verbose) as on_done:
+            try:
+                outcomes += batching.run_jobs(work, settings, workers, budget, on_done)
+            except KeyboardInterrupt:
+                raise typer.Exit(130) from None  # main() says so
+        outcomes.sort(key=lambda o: natural_text_key(o.input))
+        if summary is not None:
+            from .atomic import atomic_output
+
+            with atomic_output(summary, force=True) as fh:
+                fh.write(batching.summary_bytes(outcomes, summary.suffix.lower()))
+    finally:
+        batching.remove_empty_folders(created)  # a run that made nothing leaves no folder
     if not quiet:
         _print_batch_table(outcomes)
     statuses = [o.status for o in outcomes]
@@ -751,8 +776,10 @@ def _text_histogram(hist, rows: int = 12, width: int = 40) -> list[str]:
     """Bars of sample counts in ``rows`` equal value ranges (log scale, as CT is skewed)."""
     import numpy as np
 
+    from .stats import equal_bins
+
     lo, hi = float(hist.edges[0]), float(hist.edges[-1])
-    bounds = np.linspace(lo, hi, rows + 1)
+    bounds = equal_bins(lo, hi, rows)
     which = np.clip(np.searchsorted(bounds, hist.centers, side="right") - 1, 0, rows - 1)
     counts = np.bincount(which, weights=hist.counts, minlength=rows)
     scale = np.log1p(counts) / max(np.log1p(counts).max(), 1e-12)
@@ -866,6 +893,10 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``isoconvert`` command; returns the exit code."""
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
+    if not debug:
+        from .batch import silence_third_party
+
+        silence_third_party()  # numpy warnings and tifffile's log lines are not for users
     args = gather_multi_values([a for a in args if a != "--debug"])
     try:
         app(args=args, prog_name="isoconvert", standalone_mode=True)

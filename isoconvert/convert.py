@@ -3,77 +3,180 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields, replace
+from functools import cached_property
 from pathlib import Path
 
 from .atomic import check_output
-from .errors import OutputError
+from .errors import IsoconvertError, OutputError
 from .extract import extract
 from .mesh import Mesh
-from .readers import read_volume
+from .readers import ReadOptions, read_volume
 from .volume import Volume
-from .writers import output_format, write_mesh
+from .writers import output_format, stored_mesh, write_mesh
+
+_READ_FIELDS = frozenset(f.name for f in fields(ReadOptions))
+
+
+@dataclass(frozen=True)
+class ConvertOptions:
+    """Everything about one conversion except the paths and the level.
+
+    One value that the Python API, ``isoconvert convert`` and ``isoconvert
+    batch`` (per file, with a level mapping's overrides) share, instead of
+    loose keywords threaded through every layer.
+
+    Attributes
+    ----------
+    read : ReadOptions
+        Raw layout (shape, dtype, endian, header bytes), channel, and whether a
+        header may name data outside its folder.
+    input_format : str or None
+        Reader name; None guesses from the suffix.
+    spacing, origin : tuple of float or None
+        Override what the file says (x, y[, z]).
+    method : str or None
+        Extractor name; None picks squares for 2D and cubes for 3D.
+    flip : bool
+        Reverse the orientation.
+    ambiguity : str or None
+        Rule for ambiguous faces; None is the method's default.
+    axis : str or None
+        squares on a 3D volume: the slice axis.
+    vertex_offset : float or None
+        Fraction of an edge vertices keep from grid vertices; None: 0.001 only
+        when samples equal the level (see :func:`isoconvert.extract`).
+    nan_as : float or None
+        Value NaN/Inf samples stand for; None makes them an error.
+    format : str or None
+        Writer name; None takes it from the output suffix.
+    ascii : bool
+        Text PLY/STL.
+    force : bool
+        Overwrite an existing output.
+    """
+
+    read: ReadOptions = field(default_factory=ReadOptions)
+    input_format: str | None = None
+    spacing: tuple[float, ...] | None = None
+    origin: tuple[float, ...] | None = None
+    method: str | None = None
+    flip: bool = False
+    ambiguity: str | None = None
+    axis: str | None = None
+    vertex_offset: float | None = None
+    nan_as: float | None = None
+    format: str | None = None
+    ascii: bool = False
+    force: bool = False
+
+    def updated(self, **changes) -> ConvertOptions:
+        """A copy with ``changes``; names of :class:`ReadOptions` fields go to ``read``.
+
+        Raises
+        ------
+        IsoconvertError
+            A name that is no option.
+        """
+        read = {k: changes.pop(k) for k in list(changes) if k in _READ_FIELDS}
+        unknown = set(changes) - {f.name for f in fields(self)}
+        if unknown:
+            raise IsoconvertError(f"unknown conversion option(s): {', '.join(sorted(unknown))}")
+        if read:
+            changes["read"] = replace(self.read, **read)
+        return replace(self, **changes)
 
 
 @dataclass
 class ConvertResult:
-    """What :func:`convert` made; ``volume.notes`` says what the reader assumed."""
+    """What :func:`convert` made; ``volume.notes`` says what the reader assumed.
+
+    Attributes
+    ----------
+    volume : Volume
+    mesh : Mesh
+        The extracted mesh, in float64.
+    output : Path
+    format : str
+        The writer used.
+    ascii : bool
+        Whether the file is text.
+    """
 
     volume: Volume
     mesh: Mesh
     output: Path
+    format: str
+    ascii: bool = False
+
+    @cached_property
+    def written(self) -> Mesh:
+        """The mesh as the file holds it (vertices at the file's precision, STL
+        with three vertices per triangle): what ``convert --report`` checks,
+        against the volume's grid, so that it agrees with ``isoconvert check
+        FILE`` (``check FILE --grid VOLUME`` for STL, which records no grid)."""
+        return stored_mesh(self.mesh, self.format, self.ascii)
 
 
 def convert(
     input: str | Path,
     output: str | Path,
     level: float | str,
+    options: ConvertOptions | None = None,
     *,
-    method: str | None = None,
-    format: str | None = None,
-    ascii: bool = False,
-    force: bool = False,
-    flip: bool = False,
-    ambiguity: str | None = None,
-    axis: str | None = None,
-    vertex_offset: float | None = None,
-    nan_as: float | None = None,
-    input_format: str | None = None,
-    spacing: tuple[float, ...] | None = None,
-    origin: tuple[float, ...] | None = None,
     on_status: Callable[[str], None] | None = None,
     on_progress: Callable[[str], None] | None = None,
-    **read_options,
+    **changes,
 ) -> ConvertResult:
     """Read ``input``, extract the isosurface at ``level``, write it to ``output``.
 
     Everything that can be checked before the work is checked first (output
-    format and folder, existing file), so a mistake costs no extraction time.
-    Parameters are those of :func:`read_volume`, :func:`extract` and
-    :func:`write_mesh`; ``on_progress`` is called with the stage starting
-    ("reading", "extracting", "writing").
+    folder, existing file, output format), so a mistake costs no extraction time.
+
+    Parameters
+    ----------
+    input, output : str or Path
+    level : float or "auto"
+    options : ConvertOptions or None
+        How to read, extract and write; None for the defaults.
+    on_status : callable or None
+        Receives one-line notices (compiling, levels equal to samples, precision).
+    on_progress : callable or None
+        Called with the stage starting: "reading", "extracting", "writing".
+    **changes
+        Fields of :class:`ConvertOptions` or :class:`ReadOptions` to change,
+        e.g. ``convert("a.raw", "a.ply", 80.5, shape=(256, 256, 128), dtype="uint8")``.
     """
+    opts = (options or ConvertOptions()).updated(**changes)
     progress = on_progress or (lambda stage: None)
-    check_output(output, force)  # first: a folder given as -o is "a folder", not a format
-    writer = output_format(output, format)
+    check_output(output, opts.force)  # first: a folder given as -o is "a folder", not a format
+    writer = output_format(output, opts.format)
     if Path(output).resolve() == Path(input).resolve():
         raise OutputError(f"{output}: is the input file; choose another output name")
     progress("reading")
-    volume = read_volume(input, format=input_format, spacing=spacing, origin=origin, **read_options)
-    options = {} if axis is None else {"axis": axis}
-    if vertex_offset is not None:
-        options["vertex_offset"] = vertex_offset
+    volume = read_volume(
+        input,
+        format=opts.input_format,
+        spacing=opts.spacing,
+        origin=opts.origin,
+        **{name: getattr(opts.read, name) for name in opts.read.given()},
+    )
+    method_options = {} if opts.axis is None else {"axis": opts.axis}
+    if opts.vertex_offset is not None:
+        method_options["vertex_offset"] = opts.vertex_offset
     progress("extracting")
     mesh = extract(
         volume,
         level,
-        method=method,
-        flip=flip,
-        ambiguity=ambiguity,
-        nan_as=nan_as,
+        method=opts.method,
+        flip=opts.flip,
+        ambiguity=opts.ambiguity,
+        nan_as=opts.nan_as,
         on_status=on_status,
-        **options,
+        **method_options,
     )
     progress("writing")
-    path = write_mesh(mesh, output, format=writer.name, ascii=ascii, force=force)
-    return ConvertResult(volume, mesh, path)
+    path = write_mesh(
+        mesh, output, format=writer.name, ascii=opts.ascii, force=opts.force, on_status=on_status
+    )
+    return ConvertResult(volume, mesh, path, writer.name, opts.ascii)

@@ -191,3 +191,38 @@ def test_check_grid_judges_holes_against_the_volume_grid(tmp_path, capsys):
     code, stdout, err = run(capsys, "check", out, "--grid", cut, "--require", "no-holes")
     assert code == 0, err
     assert "bounding box" not in stdout
+
+
+@pytest.mark.parametrize("suffix", ["ply", "obj", "stl"])
+@pytest.mark.parametrize(
+    ("volume", "args"),
+    [
+        # vertices very close to grid vertices: float32 merges them
+        ("hydrogen_vtk_64x64x64_float32.raw", ["-l", "0.001"]),
+        # scanner-sized coordinates: float32 steps of 0.5
+        ("sphere.nrrd", ["-l", "127.5", "--origin", "5000000", "5000000", "0"]),
+    ],
+)
+def test_convert_report_and_check_of_the_file_agree(tmp_path, capsys, suffix, volume, args):
+    import json
+
+    from conftest import dataset
+
+    source = SAMPLES / volume if (SAMPLES / volume).exists() else dataset(volume)
+    out = tmp_path / f"mesh.{suffix}"
+    written = tmp_path / "convert.json"
+    code, _, convert_err = run(capsys, "convert", source, *args, "-o", out, "--report", written)
+    assert code == 0, convert_err
+    grid = ["--grid", source, *args[2:]] if suffix == "stl" else []
+    code, stdout, err = run(capsys, "check", out, "--json", *grid)
+    assert code == 0, err
+    from_convert = json.loads(written.read_text())
+    from_check = json.loads(stdout)
+    from_convert.pop("source"), from_check.pop("source")
+    assert from_convert == from_check
+    if suffix == "stl":  # float32 only: the loss is said, and the report shows it
+        assert "STL stores float32" in convert_err
+        assert from_check["problems"]["zero_length_edges"]["count"] > 0
+    else:  # PLY switches to doubles, OBJ is exact: nothing is lost
+        assert from_check["problems"]["zero_length_edges"]["count"] == 0
+        assert from_check["problems"]["degenerate_triangles"]["count"] == 0
