@@ -255,7 +255,7 @@ def test_hydrogen_ply_keeps_every_vertex_distinct(tmp_path, hydrogen, ascii):
     notes: list[str] = []
     path = write_mesh(hydrogen, tmp_path / "h.ply", ascii=ascii, on_status=notes.append)
     assert ply_coordinate_type(path) == "double"
-    assert notes == ["note: vertex coordinates written as double: float32 would merge 56 vertices"]
+    assert notes == ["note: vertex coordinates written as double: in float32, 56 vertices merge"]
     back = read_mesh(path)
     assert back.info["stored_precision"] == "float64"
     problems = check_mesh(back).to_dict()["problems"]
@@ -309,7 +309,7 @@ def test_a_triangle_float32_would_flatten_makes_a_double_ply(tmp_path):
     path = write_mesh(mesh, tmp_path / "t.ply", on_status=notes.append)
     assert ply_coordinate_type(path) == "double"
     assert notes == [
-        "note: vertex coordinates written as double: float32 would make 1 triangles degenerate"
+        "note: vertex coordinates written as double: in float32, 1 triangles become degenerate"
     ]
     assert check_mesh(read_mesh(path)).problems["degenerate_triangles"]["count"] == 0
     write_mesh(mesh, tmp_path / "t.stl", on_status=notes.append)
@@ -322,7 +322,7 @@ def test_segments_float32_would_collapse_make_a_double_ply(tmp_path):
     notes: list[str] = []
     path = write_mesh(mesh, tmp_path / "s.ply", on_status=notes.append)
     assert ply_coordinate_type(path) == "double"
-    assert notes == ["note: vertex coordinates written as double: float32 would merge 1 vertices"]
+    assert notes == ["note: vertex coordinates written as double: in float32, 1 vertices merge"]
     assert np.array_equal(read_mesh(path).vertices, vertices)
 
 

@@ -24,7 +24,7 @@ from ..registry import Registry
 from .header import normalized_grid
 from .obj import write_obj
 from .ply import write_ply
-from .precision import Float32Loss, float32_loss
+from .precision import float32_loss
 from .stl import write_stl
 from .svg import write_svg
 
@@ -157,18 +157,6 @@ def _check_cells(writer: Writer, mesh: Mesh, name: str | Path) -> None:
         )
 
 
-def _loss_words(loss: Float32Loss, kind: str) -> str:
-    """``merge 56 vertices and make 112 triangles degenerate``."""
-    parts = []
-    if loss.overflow_vertices:
-        parts.append(f"overflow {loss.overflow_vertices:,} vertices (beyond its range)")
-    if loss.merged_vertices:
-        parts.append(f"merge {loss.merged_vertices:,} vertices")
-    if loss.degenerate_cells:
-        parts.append(f"make {loss.degenerate_cells:,} {kind} degenerate")
-    return " and ".join(parts)
-
-
 def _stored(
     writer: Writer, mesh: Mesh, on_status: Callable[[str], None] | None, expand: bool = True
 ) -> Mesh:
@@ -197,8 +185,7 @@ def _stored(
         precision = "float64" if loss.any else "float32"
         if loss.any and on_status:
             on_status(
-                "note: vertex coordinates written as double: float32 would "
-                + _loss_words(loss, kind)
+                f"note: vertex coordinates written as double: in float32, {loss.describe(kind)}"
             )
     elif precision == "float32":
         loss = float32_loss(vertices, cells)
