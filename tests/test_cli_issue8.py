@@ -226,3 +226,23 @@ def test_convert_report_and_check_of_the_file_agree(tmp_path, capsys, suffix, vo
     else:  # PLY switches to doubles, OBJ is exact: nothing is lost
         assert from_check["problems"]["zero_length_edges"]["count"] == 0
         assert from_check["problems"]["degenerate_triangles"]["count"] == 0
+
+
+def test_info_and_auto_level_on_values_near_the_largest_doubles(tmp_path, capsys):
+    raw = tmp_path / "huge_6x6x6_float64.raw"
+    data = np.full((6, 6, 6), -1.7e308)
+    data[2:4, 2:4, 2:4] = 1.7e308
+    data.tofile(raw)
+    code, stdout, err = run(capsys, "info", raw)
+    assert code == 0, err
+    import re
+
+    assert not re.search(r"(?<![\w/])-?(inf|nan)\b", stdout, re.IGNORECASE), stdout
+    assert "Traceback" not in err and "Warning" not in err
+    out = tmp_path / "huge.ply"
+    code, _, err = run(capsys, "convert", raw, "-l", "auto", "-o", out, "--report", "-q")
+    assert code == 0, err
+    import trimesh
+
+    mesh = trimesh.load(out, process=False)
+    assert mesh.is_watertight and np.isfinite(mesh.vertices).all()
