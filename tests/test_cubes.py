@@ -271,11 +271,17 @@ def test_samples_near_the_largest_doubles_interpolate_as_scaled_down_ones(method
     power of two scales no interpolation fraction, so the mesh must equal that
     of the scaled-down volume exactly."""
     field = ball(12, 4.3)  # about -13 .. 4.3
-    huge = field * (1.7e308 / np.abs(field).max())
+    # samples of both signs near the largest doubles: inside, +1.7e308 ...;
+    # outside, -1.7e308 ... (every bipolar edge overflows s1 - s0)
+    huge = np.where(field >= 0, 1.7e308 - field * 1e300, -1.7e308 + field * 1e300)
     small = huge / 2.0**1000
     kw = {"axis": "z"} if method == "squares" else {}
     big = extract(Volume(huge), 0.0, method=method, **kw)
     ref = extract(Volume(small), 0.0, method=method, **kw)
     assert np.isfinite(big.vertices).all()
+    with np.errstate(over="ignore"):
+        assert np.isinf(np.diff(huge, axis=0)).any()
+    # no vertex on a grid point: each lies strictly inside its edge
+    assert (np.abs(big.vertices - np.rint(big.vertices)).max(axis=1) > 0.1).all()
     np.testing.assert_array_equal(big.vertices, ref.vertices)
     np.testing.assert_array_equal(big.cells, ref.cells)

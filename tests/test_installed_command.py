@@ -104,3 +104,24 @@ def test_numba_cache_is_not_written_into_the_package(tmp_path):
     package = Path(isoconvert.__file__).parent
     fresh = [p for p in package.rglob("*.nb[ic]") if p.stat().st_mtime >= start - 1]
     assert not fresh, f"numba wrote its cache into the package: {fresh[:3]}"
+
+
+def test_kernels_are_recompiled_when_any_kernel_source_changes(tmp_path):
+    """numba checks a cached kernel against its own file only, not against the
+    helpers it inlines; the cache sub-folder is named by a hash of all kernel
+    sources, so changing any of them starts a fresh cache."""
+    import shutil
+
+    from numba.core import config
+
+    from isoconvert.extract import kernels
+
+    assert Path(config.CACHE_DIR).name == kernels.source_stamp()
+    copy = tmp_path / "kernels"
+    shutil.copytree(
+        Path(kernels.__file__).parent, copy, ignore=shutil.ignore_patterns("__pycache__")
+    )
+    assert kernels.source_stamp(copy) == kernels.source_stamp()
+    helper = copy / "interpolate.py"
+    helper.write_text(helper.read_text() + "\n# changed\n")
+    assert kernels.source_stamp(copy) != kernels.source_stamp()

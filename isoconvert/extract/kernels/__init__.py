@@ -17,7 +17,8 @@ from pathlib import Path
 
 
 def cache_folder() -> Path:
-    """The folder numba caches isoconvert's compiled kernels in.
+    """The folder under which numba caches isoconvert's compiled kernels (in a
+    sub-folder per version of the kernel sources, see :func:`source_stamp`).
 
     ``NUMBA_CACHE_DIR`` when set; else ``isoconvert/numba`` in the user's cache
     folder (platformdirs), or in the temporary folder when that one cannot be
@@ -44,14 +45,29 @@ def _per_user() -> str:
     return f"isoconvert-{uid}"
 
 
+def source_stamp(folder: Path | None = None) -> str:
+    """A hash of the kernel sources: the name of their cache sub-folder.
+
+    numba checks a cached function against its own file only; a kernel that
+    inlines a helper from another module (``interpolate.py``) would keep the
+    helper's old code after the helper changed. One sub-folder per version of
+    all kernel sources makes any change recompile everything.
+    """
+    import hashlib
+
+    digest = hashlib.sha256()
+    for source in sorted((folder or Path(__file__).parent).glob("*.py")):
+        digest.update(source.name.encode() + b"\0" + source.read_bytes())
+    return digest.hexdigest()[:16]
+
+
 def _use_cache_folder() -> None:
     # numba picks a function's cache locator when the function is decorated, so
     # this must run before the kernel modules are imported; CACHE_DIR set here
     # makes numba's user-provided locator win over its in-tree one.
     from numba.core import config
 
-    if not config.CACHE_DIR:
-        config.CACHE_DIR = str(cache_folder())
+    config.CACHE_DIR = str(cache_folder() / source_stamp())
 
 
 _use_cache_folder()

@@ -14,7 +14,9 @@ def edge_fraction(s0, s1, level, offset):
     overflow to infinity; the same ratio is then taken at half scale, where
     nothing overflows.
     """
-    t = (level - s0) / (s1 - s0)
-    if not (0.0 <= t <= 1.0):
+    d = s1 - s0
+    if d - d == 0.0:  # finite
+        t = (level - s0) / d
+    else:
         t = (0.5 * level - 0.5 * s0) / (0.5 * s1 - 0.5 * s0)
     return min(max(t, offset), 1.0 - offset)
