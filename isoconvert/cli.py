@@ -18,14 +18,35 @@ from typing import Annotated
 import typer
 
 from . import __version__
+from .atomic import check_output
 from .errors import IsoconvertError, VolumeError, one_line
 from .extract import EXTRACTORS, NO_DEGENERATE_OFFSET, SQUARE_AMBIGUITY_RULES
 from .readers import READERS
 from .report import CHECK_NAMES
 from .writers import WRITERS
 
+
+class _HelpAsFlag:
+    """Show ``--help`` as a flag, as our own flags (typer would show ``-h <bool>``)."""
+
+    def get_help_option(self, ctx):
+        option = super().get_help_option(ctx)
+        if option is not None:
+            option.metavar = ""
+        return option
+
+
+class _Command(_HelpAsFlag, typer.core.TyperCommand):
+    pass
+
+
+class _Group(_HelpAsFlag, typer.core.TyperGroup):
+    pass
+
+
 app = typer.Typer(
     name="isoconvert",
+    cls=_Group,
     help="Turn scalar volumes and images (raw, NRRD, TIFF, PNG, JPEG) into isosurface meshes "
     "and contours (PLY, OBJ, STL, SVG), and check meshes.",
     no_args_is_help=True,
@@ -78,7 +99,8 @@ InputFormatOpt = Annotated[
 ShapeOpt = Annotated[
     str | None,
     typer.Option(
-        help="Raw: samples along x y [z], e.g. --shape 256 256 128.", rich_help_panel="Input"
+        help="Raw: samples along x and y (and z), e.g. --shape 256 256 128.",
+        rich_help_panel="Input",
     ),
 ]
 DtypeOpt = Annotated[
@@ -95,7 +117,9 @@ ChannelOpt = Annotated[
 ]
 SpacingOpt = Annotated[
     str | None,
-    typer.Option(help="Override the spacing: x y [z].", rich_help_panel="Input"),
+    typer.Option(
+        help="Override the spacing: x y (z), e.g. --spacing 0.5 0.5 2.", rich_help_panel="Input"
+    ),
 ]
 AllowOutsideOpt = Annotated[
     bool,
@@ -107,7 +131,7 @@ AllowOutsideOpt = Annotated[
 ]
 OriginOpt = Annotated[
     str | None,
-    typer.Option(help="Override the origin: x y [z].", rich_help_panel="Input"),
+    typer.Option(help="Override the origin: x y (z).", rich_help_panel="Input"),
 ]
 
 
@@ -121,7 +145,7 @@ COMPILE_HINT = "about 10-25 s, once per method and sample type; `isoconvert warm
 
 
 @contextmanager
-def _stage_display(quiet: bool, verbose: bool = False):
+def _stage_display(quiet: bool, verbose: bool = False, hint: str = COMPILE_HINT):
     """Yield ``(on_progress, on_status)`` for :func:`isoconvert.convert`.
 
     On a terminal a spinner names the stage (reading, extracting, writing) and,
@@ -138,7 +162,7 @@ def _stage_display(quiet: bool, verbose: bool = False):
         def stage_line(stage: str) -> None:
             print(f"{time.perf_counter() - start:7.2f} s  {stage}", file=sys.stderr)
 
-        yield (stage_line if verbose else None), _status(quiet)
+        yield (stage_line if verbose else None), _status(quiet, hint)
         return
     from rich.console import Console
 
@@ -147,21 +171,22 @@ def _stage_display(quiet: bool, verbose: bool = False):
 
         def on_status(message: str) -> None:
             if message.startswith("compiling"):
-                status.update(f"{message} ({COMPILE_HINT})...")
+                status.update(f"{message} ({hint})...")
             else:
                 console.print(message, markup=False, highlight=False)
 
         yield (lambda stage: status.update(f"{stage}...")), on_status
 
 
-def _status(quiet: bool):
-    """Notices as plain lines on stderr (None when quiet)."""
+def _status(quiet: bool, hint: str = COMPILE_HINT):
+    """Notices as plain lines on stderr (None when quiet); ``hint`` follows a
+    notice that a kernel is compiling."""
     if quiet:
         return None
 
     def say(message: str) -> None:
         if message.startswith("compiling"):
-            message = f"{message} ({COMPILE_HINT})"
+            message = f"{message} ({hint})"
         print(message, file=sys.stderr, flush=True)
 
     return say
@@ -226,7 +251,7 @@ def _main(
         raise typer.Exit()
 
 
-@app.command()
+@app.command(cls=_Command)
 def convert(
     input: Annotated[str, typer.Argument(help="Volume file, folder of TIFF slices, or glob.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Mesh file to write.")],
@@ -306,6 +331,8 @@ def convert(
     from .report import parse_requirements
 
     required = parse_requirements(require)
+    if report not in (None, "-"):
+        check_output(report, force)  # before the work: a bad report name must not cost a mesh
     from .convert import convert as run_convert
 
     start = time.perf_counter()
@@ -359,7 +386,7 @@ def convert(
         _emit_report(checked, report, required, as_json=False, force=force, quiet=quiet)
 
 
-@app.command()
+@app.command(cls=_Command)
 def check(
     mesh_file: Annotated[Path, typer.Argument(help="OBJ, PLY or STL file to check.")],
     require: RequireOpt = None,
@@ -433,7 +460,7 @@ def _emit_report(checked, target, required, *, as_json, force, quiet) -> None:
         raise typer.Exit(EXIT_CHECK_FAILED)
 
 
-@app.command()
+@app.command(cls=_Command)
 def batch(
     inputs: Annotated[list[str], typer.Argument(help="Files, folders or globs of volumes.")],
     out_dir: Annotated[Path, typer.Option("-o", "--output", help="Folder for the meshes.")],
@@ -505,10 +532,10 @@ def batch(
     if out_dir.exists() and not out_dir.is_dir():
         raise VolumeError(f"{out_dir}: exists and is not a folder; choose another -o")
     budget = _bytes(max_memory) if max_memory else _default_budget()
-    if summary is not None:
-        batching.summary_bytes([], summary.suffix.lower())  # a bad suffix fails now, not at the end
-        if summary.exists() and not (force or skip_existing):
-            raise VolumeError(f"{summary}: already exists; pass --force to overwrite it")
+    if summary is not None:  # a bad summary name fails now, not at the end
+        if summary.suffix.lower() not in (".json", ".csv"):
+            raise VolumeError(f"{summary}: --summary takes a .json or .csv file name")
+        check_output(summary, force or skip_existing)
     rules = batching.read_mapping(levels) if levels else None
     found, skipped = batching.discover(
         inputs, recursive=recursive, exclude=out_dir, images=images or method == "squares"
@@ -704,7 +731,7 @@ def _print_batch_table(outcomes) -> None:
     print(", ".join(f"{n} {s}" for s, n in totals.items()))
 
 
-@app.command()
+@app.command(cls=_Command)
 def info(
     input: Annotated[str, typer.Argument(help="Volume file, folder of TIFF slices, or glob.")],
     as_json: Annotated[bool, _flag("--json", help="Print JSON instead of text.")] = False,
@@ -790,7 +817,7 @@ def _text_histogram(hist, rows: int = 12, width: int = 40) -> list[str]:
     ]
 
 
-@app.command()
+@app.command(cls=_Command)
 def warmup(
     methods: Annotated[
         str,
@@ -812,7 +839,7 @@ def warmup(
 
     chosen_methods = _choices(methods, COMPILED_METHODS)
     chosen_dtypes = _choices(dtypes, SUPPORTED_DTYPES)
-    with _stage_display(quiet) as (_, on_status):
+    with _stage_display(quiet, hint="about 10-25 s each") as (_, on_status):
         done = run_warmup(chosen_methods, chosen_dtypes, on_status=on_status)
     if not quiet:
         for item in done:
@@ -826,7 +853,7 @@ def _choices(text: str, known: tuple[str, ...]) -> list[str]:
     return list(known) if names == ["all"] else names
 
 
-@app.command()
+@app.command(cls=_Command)
 def formats() -> None:
     """List input formats, output formats and extraction methods."""
     print("input formats:")
@@ -839,7 +866,7 @@ def formats() -> None:
     _print_methods()
 
 
-@app.command()
+@app.command(cls=_Command)
 def methods() -> None:
     """List extraction methods (built-in and installed plugins)."""
     _print_methods()

@@ -13,7 +13,7 @@ from .extract import extract
 from .mesh import Mesh
 from .readers import ReadOptions, read_volume
 from .volume import Volume
-from .writers import output_format, stored_mesh, write_mesh
+from .writers import WRITERS, output_format, stored_mesh, write_mesh
 
 _READ_FIELDS = frozenset(f.name for f in fields(ReadOptions))
 
@@ -151,6 +151,9 @@ def convert(
     progress = on_progress or (lambda stage: None)
     check_output(output, opts.force)  # first: a folder given as -o is "a folder", not a format
     writer = output_format(output, opts.format)
+    by_suffix = WRITERS.by_suffix(Path(output).suffix)
+    if on_status and by_suffix and by_suffix[0] != writer.name:
+        on_status(f"note: writing {writer.name} into {output}, whose extension says {by_suffix[0]}")
     if Path(output).resolve() == Path(input).resolve():
         raise OutputError(f"{output}: is the input file; choose another output name")
     progress("reading")

@@ -137,10 +137,13 @@ def test_help_shows_flags_as_flags(capsys, command, monkeypatch):
     code = main([command, "--help"])
     out = capsys.readouterr().out
     assert code == 0
-    flags = ("--quiet", "--force", "--json", "--ascii")
+    flags = ("--quiet", "--force", "--json", "--ascii", "--help")
     flag_lines = [line for line in out.splitlines() if any(f in line for f in flags)]
     assert flag_lines
     assert not any("<bool>" in line for line in flag_lines), flag_lines
+    if command in ("convert", "batch", "info", "check"):
+        shape = next(line for line in out.splitlines() if "--shape" in line)
+        assert "(and z)" in shape  # not eaten as rich markup, as "[z]" was
 
 
 def test_warmup_compiles_then_finds_the_cache(capsys):
@@ -246,3 +249,40 @@ def test_info_and_auto_level_on_values_near_the_largest_doubles(tmp_path, capsys
 
     mesh = trimesh.load(out, process=False)
     assert mesh.is_watertight and np.isfinite(mesh.vertices).all()
+
+
+def test_a_bad_report_name_fails_before_the_mesh_is_written(tmp_path, capsys):
+    out = tmp_path / "s.ply"
+    code, _, err = run(
+        capsys, "convert", SPHERE, "-l", "127.5", "-o", out, "--report=/dev/null", "--force"
+    )
+    assert_one_line_error(code, err, "/dev/null", "not a regular file")
+    assert not out.exists()
+
+
+def test_batch_summary_that_is_not_a_regular_file(tmp_path, capsys):
+    batch = ["batch", SPHERE, "-o", tmp_path / "out", "-l", "127.5", "--force", "--summary"]
+    code, _, err = run(capsys, *batch, "/dev/null")
+    assert_one_line_error(code, err, "/dev/null", ".json or .csv")
+    fifo = tmp_path / "fifo.json"
+    os.mkfifo(fifo)
+    code, _, err = run(capsys, *batch, fifo)
+    assert_one_line_error(code, err, "not a regular file")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_glob_of_dicom_files_is_named_as_dicom(tmp_path, capsys):
+    for n in range(3):
+        (tmp_path / f"{n:06d}.dcm").write_bytes(bytes(128) + b"DICM" + bytes(64))
+    code, _, err = run(capsys, "convert", f"{tmp_path}/*.dcm", "-l", "1", "-o", tmp_path / "o.ply")
+    assert_one_line_error(code, err, "DICOM is not read yet")
+
+
+def test_format_that_contradicts_the_extension_is_said(tmp_path, capsys):
+    import trimesh
+
+    out = tmp_path / "s.stl"
+    code, _, err = run(capsys, "convert", SPHERE, "-l", "127.5", "-o", out, "--format", "ply")
+    assert code == 0, err
+    assert "writing ply into" in err and "extension says stl" in err
+    assert len(trimesh.load(out, file_type="ply", process=False).faces) > 0

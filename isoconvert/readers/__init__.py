@@ -231,7 +231,9 @@ def read_volume(
     if not p.exists() and not (globlib.has_magic(spec) and globlib.glob(spec)):
         raise InputNotFoundError(f"{spec}: no such file or folder")
     if format is None:
-        reason = unsupported_format(p) if p.exists() else None
+        # a glob is judged by its first match, as detect_format does
+        first = p if p.exists() else Path(sorted(globlib.glob(spec))[0])
+        reason = unsupported_format(first)
         if reason:
             raise FormatError(f"{spec}: {reason}")
     name = format.lower() if format else detect_format(spec)
