@@ -743,13 +743,22 @@ def info(
     channel: ChannelOpt = None,
     spacing: SpacingOpt = None,
     origin: OriginOpt = None,
+    allow_outside_data: AllowOutsideOpt = False,
 ) -> None:
     """Describe a volume (size, spacing, value range, histogram) and suggest isovalues."""
     from .readers import read_volume
     from .stats import histogram, suggested_levels
 
     kwargs = _read_kwargs(
-        input_format, shape, dtype, endian, header_bytes, channel, spacing, origin
+        input_format,
+        shape,
+        dtype,
+        endian,
+        header_bytes,
+        channel,
+        spacing,
+        origin,
+        allow_outside_data,
     )
     volume = read_volume(input, format=kwargs.pop("input_format"), **kwargs)
     hist = histogram(volume.data)

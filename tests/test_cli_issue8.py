@@ -286,3 +286,36 @@ def test_format_that_contradicts_the_extension_is_said(tmp_path, capsys):
     assert code == 0, err
     assert "writing ply into" in err and "extension says stl" in err
     assert len(trimesh.load(out, file_type="ply", process=False).faces) > 0
+
+
+@pytest.mark.parametrize("command", ["info", "convert", "check-grid", "batch"])
+def test_data_outside_the_header_folder_needs_the_flag_everywhere(tmp_path, capsys, command):
+    """A detached header naming ../secret.raw: refused by every command that
+    reads volumes, each of which offers --allow-outside-data."""
+    data = np.zeros((4, 4, 4), np.uint8)
+    data[1:3, 1:3, 1:3] = 200
+    (tmp_path / "secret.raw").write_bytes(data.tobytes())
+    inner = tmp_path / "headers"
+    inner.mkdir()
+    header = inner / "scan.nhdr"
+    header.write_text(
+        "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n"
+        "data file: ../secret.raw\n"
+    )
+    out = tmp_path / "out"
+    out.mkdir()
+    args = {
+        "info": ["info", header],
+        "convert": ["convert", header, "-l", "100", "-o", out / "s.ply"],
+        "check-grid": ["check", SAMPLES / "figure_2_4.nrrd", "--grid", header],
+        "batch": ["batch", header, "-l", "100", "-o", out / "b"],
+    }[command]
+    if command == "check-grid":  # check needs a mesh: make one first
+        mesh = out / "m.ply"
+        assert run(capsys, "convert", SPHERE, "-l", "127.5", "-o", mesh)[0] == 0
+        args = ["check", mesh, "--grid", header]
+    code, stdout, err = run(capsys, *args)
+    assert code == 1
+    assert "outside the header's folder" in err + stdout
+    code, stdout, err = run(capsys, *args, "--allow-outside-data")
+    assert code == 0, err
