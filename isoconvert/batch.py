@@ -24,7 +24,7 @@ from pathlib import Path
 
 from .convert import ConvertOptions
 from .errors import InputNotFoundError, IsoconvertError, OutputError
-from .readers import READERS
+from .readers import READERS, unsupported_format
 from .readers.tiff import TIFF_SUFFIXES, natural_key
 
 #: Bytes of working memory a conversion needs per byte of samples (a native-order
@@ -97,7 +97,6 @@ class Outcome:
 IMAGE_REASON = "a 2D image; pass --images to contour 2D images"
 #: Why a file of no known format is not converted.
 UNKNOWN_REASON = "not a volume format isoconvert reads"
-_DICOM_SUFFIXES = (".dcm", ".dicom")
 
 
 def discover(
@@ -276,7 +275,7 @@ def _add_files(paths: list[Path], root: Path, found, skipped, images: bool = Fal
         for header in folder.glob("*.[mM][hH][dD]"):
             consumed.update({data: header for data in _mhd_data_files(header)})
     given = {q.resolve() for q in paths}
-    dicom: dict[Path, list[tuple[Path, str | None]]] = {}  # folder: DICOM files, why
+    dicom: dict[Path, list[tuple[Path, str]]] = {}  # folder: DICOM files, why
     start = len(found)
     for p in paths:
         header = consumed.get(p.resolve())
@@ -289,8 +288,8 @@ def _add_files(paths: list[Path], root: Path, found, skipped, images: bool = Fal
             # the header's format is not read yet: the file may still be read as raw
         match = READERS.by_suffix(p.suffix)
         if match is None:
-            reason = _unsupported(p)
-            if _is_dicom(p):
+            reason = unsupported_format(p)
+            if reason and reason.startswith("DICOM"):
                 dicom.setdefault(p.parent, []).append((p, reason))
             else:
                 skipped.append(Skipped(str(p), reason or UNKNOWN_REASON))
@@ -307,43 +306,10 @@ def _add_files(paths: list[Path], root: Path, found, skipped, images: bool = Fal
     for folder, files in dicom.items():
         if len(files) > 1 and folder not in with_volumes:
             # a DICOM series: one item, not one per slice
-            why = files[0][1] or "DICOM is not read yet"
-            reason = f"a DICOM series of {len(files)} files; {why}"
+            reason = f"a DICOM series of {len(files)} files; {files[0][1]}"
             skipped.append(Skipped(str(folder), reason, files=len(files)))
         else:
-            skipped.extend(Skipped(str(p), reason or UNKNOWN_REASON) for p, reason in files)
-
-
-def _unsupported(path: Path) -> str | None:
-    """Why a file of a known format isoconvert does not read yet is skipped, if it is one.
-
-    What ``readers.unsupported_format`` says, without the path it starts with
-    (the summary names the file, and files of one kind then share one reason);
-    where that function is absent, None (the file is of an unknown format).
-    """
-    from . import readers
-
-    check = getattr(readers, "unsupported_format", None)
-    if check is None:
-        return None
-    try:
-        reason = check(path)
-    except OSError:  # unreadable: its conversion would fail anyway, say so there
-        return None
-    if reason:
-        reason = reason.removeprefix(f"{path}: ")
-    return reason or None
-
-
-def _is_dicom(path: Path) -> bool:
-    """A DICOM file: its suffix, or the ``DICM`` mark after the 128-byte preamble."""
-    if path.suffix.lower() in _DICOM_SUFFIXES:
-        return True
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(132)[128:] == b"DICM"
-    except OSError:
-        return False
+            skipped.extend(Skipped(str(p), reason) for p, reason in files)
 
 
 def _is_2d_image(path: Path, reader: str) -> bool:
@@ -357,21 +323,19 @@ def _is_2d_image(path: Path, reader: str) -> bool:
         if reader == "tiff":
             import tifffile
 
+            from .readers.tiff import kept_axes
+
             with tifffile.TiffFile(path) as tif:
                 series = tif.series[0]
-                axes = [
-                    a for a, n in zip(series.axes, series.shape, strict=True) if n > 1 or a in "XY"
-                ]
-            # as the reader: singleton axes dropped, then one channel axis
-            return len(axes) - any(a in "CS" for a in axes) == 2
+                axes = kept_axes(series.axes, series.shape)
+            return len(axes) - any(a in "CS" for a in axes) == 2  # less a channel axis
         if reader == "nrrd":
             import nrrd
 
+            from .readers.nrrd import spatial_axes
+
             header = nrrd.read_header(str(path))
-            kinds = header.get("kinds")
-            if kinds is None:
-                kinds = ["domain"] * int(header["dimension"])
-            return sum(k in ("domain", "space", "time") for k in kinds) == 2
+            return len(spatial_axes(header.get("kinds"), int(header["dimension"]))) == 2
     except Exception:  # pynrrd and tifffile raise many kinds on a bad header
         return False
     return False

@@ -283,16 +283,7 @@ def test_a_dicom_series_folder_is_skipped_as_one_item(tmp_path):
         check_found([str(series)], found, skipped)
 
 
-def test_discovery_gives_the_reason_readers_give_for_formats_not_read_yet(tmp_path, monkeypatch):
-    def unsupported_format(path: Path) -> str | None:
-        """As readers.unsupported_format: a reason naming the path, or None."""
-        if path.name.endswith(".nii.gz"):
-            return f"{path}: NIfTI is not read yet; convert it to NRRD"
-        if path.suffix == ".dcm" or path.name.startswith("IM"):
-            return f"{path}: DICOM is not read yet; convert the series to NRRD"
-        return None
-
-    monkeypatch.setattr(readers, "unsupported_format", unsupported_format, raising=False)
+def test_discovery_gives_the_reason_readers_give_for_formats_not_read_yet(tmp_path):
     (tmp_path / "series").mkdir()
     for k in range(3):
         (tmp_path / "series" / f"IM{k}").write_bytes(dicom_bytes())
@@ -301,10 +292,12 @@ def test_discovery_gives_the_reason_readers_give_for_formats_not_read_yet(tmp_pa
     found, skipped = discover([str(tmp_path)], recursive=True)
     reasons = {Path(s.path).name: s.reason for s in skipped}
     assert not found
+    dicom = readers.unsupported_format(tmp_path / "series" / "IM0")
+    assert dicom.startswith("DICOM is not read yet")
     assert reasons == {
-        "t1.nii.gz": "NIfTI is not read yet; convert it to NRRD",
+        "t1.nii.gz": readers.unsupported_format(tmp_path / "t1.nii.gz"),
         "notes.txt": UNKNOWN_REASON,
-        "series": "a DICOM series of 3 files; DICOM is not read yet; convert the series to NRRD",
+        "series": f"a DICOM series of 3 files; {dicom}",
     }
 
 

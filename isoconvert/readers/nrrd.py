@@ -568,12 +568,18 @@ def _read_ascii_part(path, source, out, line_skip, byte_skip, described, header)
 # --- axes and placement ---------------------------------------------------------------------
 
 
+def spatial_axes(kinds: list[str] | None, ndim: int) -> list[int]:
+    """The axes that are the grid's: kinds domain, space or time (every one of
+    the ``ndim`` axes when the header gives no kinds)."""
+    if kinds is None:
+        return list(range(ndim))
+    return [a for a, k in enumerate(kinds) if k in ("domain", "space", "time")]
+
+
 def _domain_axes(path: Path, header: dict, data: np.ndarray, channel: int | None):
     """Pick the spatial axes; a non-spatial axis (RGB, vector) needs ``channel``."""
     kinds = header.get("kinds")
-    if kinds is None:
-        kinds = ["domain"] * data.ndim
-    spatial = [a for a, k in enumerate(kinds) if k in ("domain", "space", "time")]
+    spatial = spatial_axes(kinds, data.ndim)
     other = [a for a in range(data.ndim) if a not in spatial]
     if len(other) > 1 or len(spatial) not in (2, 3):
         raise VolumeError(

@@ -110,9 +110,17 @@ def _page_size(page) -> str:
     return f"{page.imagewidth}x{page.imagelength}{extra} {page.dtype}"
 
 
+def kept_axes(axes: str, shape: tuple[int, ...]) -> str:
+    """The axes of a TIFF series the reader keeps: X, Y and every axis longer than 1.
+
+    Of these, a ``C`` or ``S`` axis is the channel axis; the others are the image's.
+    """
+    return "".join(a for a, n in zip(axes, shape, strict=True) if n > 1 or a in "XY")
+
+
 def _pick_channel(array: np.ndarray, axes: str, channel: int | None, path: Path) -> np.ndarray:
     """Drop singleton axes; select ``channel`` along a sample/channel axis."""
-    keep = [a for a, n in zip(axes, array.shape, strict=True) if n > 1 or a in "XY"]
+    keep = kept_axes(axes, array.shape)
     array = array.reshape([n for a, n in zip(axes, array.shape, strict=True) if a in keep])
     axes = "".join(keep)
     ax = next((i for i, a in enumerate(axes) if a in "CS"), None)
