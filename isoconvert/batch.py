@@ -11,11 +11,9 @@ import fnmatch
 import glob as globlib
 import io
 import json
-import logging
 import os
 import time
 import tomllib
-import warnings
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -24,6 +22,7 @@ from pathlib import Path
 
 from .convert import ConvertOptions
 from .errors import InputNotFoundError, IsoconvertError, OutputError
+from .quiet import silence_third_party
 from .readers import READERS, unsupported_format
 from .readers.tiff import TIFF_SUFFIXES, natural_key
 
@@ -873,40 +872,6 @@ def check_jobs(jobs: int | None, files: int | None = None) -> int:
     if files is not None:
         count = min(count, max(files, 1))
     return max(count, 1)
-
-
-#: Messages numpy warns with that mean nothing to a batch user (NaN, overflow,
-#: empty slices are handled or reported by isoconvert itself).
-_NUMPY_MESSAGES = (
-    r".*encountered in",  # divide by zero / overflow / invalid value / underflow
-    r"Mean of empty slice",
-    r"Degrees of freedom <= 0",
-    r"All-NaN (slice|axis) encountered",
-)
-
-
-def silence_third_party() -> None:
-    """Keep numpy's warnings and tifffile's log lines off stderr, in this process.
-
-    Ignores warnings raised inside numpy, numpy's own warning classes and its
-    floating-point RuntimeWarnings (raised at the caller's line), and gives the
-    ``tifffile`` logger a handler that drops everything (not passed on to the
-    root logger). Called in every batch worker process; the CLI calls it too.
-    Safe to call more than once.
-    """
-    import numpy as np
-
-    warnings.filterwarnings("ignore", module=r"numpy(\.|$)")
-    for name in ("ComplexWarning", "VisibleDeprecationWarning", "RankWarning"):
-        category = getattr(np.exceptions, name, None)
-        if category is not None:
-            warnings.filterwarnings("ignore", category=category)
-    for message in _NUMPY_MESSAGES:
-        warnings.filterwarnings("ignore", message=message, category=RuntimeWarning)
-    log = logging.getLogger("tifffile")
-    if not any(isinstance(h, logging.NullHandler) for h in log.handlers):
-        log.addHandler(logging.NullHandler())
-    log.propagate = False
 
 
 # --- summary ----------------------------------------------------------------------------------

@@ -930,7 +930,7 @@ def main(argv: list[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     if not debug:
-        from .batch import silence_third_party
+        from .quiet import silence_third_party
 
         silence_third_party()  # numpy warnings and tifffile's log lines are not for users
     args = gather_multi_values([a for a in args if a != "--debug"])
