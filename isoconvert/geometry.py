@@ -57,9 +57,21 @@ def flat_triangles(vertices: np.ndarray, cells: np.ndarray, cross: np.ndarray) -
     (C,) bool
     """
     v = np.asarray(vertices, dtype=np.float64)
-    corners = v[cells]  # (C, 3, 3)
-    magnitude = np.abs(corners).max(axis=(1, 2))
-    edges = corners - np.roll(corners, -1, axis=1)
-    longest = np.sqrt((edges**2).sum(axis=2).max(axis=1))
-    bound = FLAT_ROUNDING_UNITS * np.finfo(np.float64).eps * magnitude * longest
-    return np.linalg.norm(cross, axis=1) <= bound
+    norm = np.linalg.norm(cross, axis=1)
+    # The bound is at most k * eps * M * 2 sqrt(3) M for M the largest finite
+    # coordinate (m <= M, and no edge is longer than the diagonal of [-M, M]^3):
+    # triangles above that are not flat, and the exact bound is computed only
+    # for the rest (usually almost none).
+    finite = np.isfinite(v)
+    big = float(np.abs(v[finite]).max()) if finite.any() else 0.0
+    coarse = FLAT_ROUNDING_UNITS * np.finfo(np.float64).eps * big * (2.0 * np.sqrt(3.0) * big)
+    candidates = np.flatnonzero(~(norm > coarse * (1.0 + 1e-9)))
+    flat = np.zeros(len(cells), dtype=bool)
+    if len(candidates):
+        corners = v[np.asarray(cells)[candidates]]  # (K, 3, 3)
+        magnitude = np.abs(corners).max(axis=(1, 2))
+        edges = corners - np.roll(corners, -1, axis=1)
+        longest = np.sqrt((edges**2).sum(axis=2).max(axis=1))
+        bound = FLAT_ROUNDING_UNITS * np.finfo(np.float64).eps * magnitude * longest
+        flat[candidates] = norm[candidates] <= bound
+    return flat

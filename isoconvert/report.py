@@ -56,7 +56,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import FormatError, IsoconvertError
-from .geometry import FLAT_ROUNDING_UNITS, flat_triangles, triangle_cross
+from .geometry import flat_triangles, triangle_cross
 from .graph import connected_components, group_sizes, row_groups
 from .mesh import Mesh
 
@@ -463,7 +463,7 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
     repeated = (tris[:, 0] == tris[:, 1]) | (tris[:, 1] == tris[:, 2]) | (tris[:, 0] == tris[:, 2])
     cross = triangle_cross(unique, tris)
     area2 = np.linalg.norm(cross, axis=1)
-    flat = _flat(unique, tris, cross, area2) & ~repeated
+    flat = flat_triangles(unique, tris, cross) & ~repeated
     degenerate = repeated | flat
     examples_deg = [
         {
@@ -610,32 +610,6 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
         "per_component": components,
     }
     return Report("triangles", counts, checks, problems, topology, measures, frame.name)
-
-
-def _flat(unique: np.ndarray, tris: np.ndarray, cross: np.ndarray, area2: np.ndarray) -> np.ndarray:
-    """(C,) bool: :func:`~isoconvert.geometry.flat_triangles`, computed only where it can hold.
-
-    Its bound ``k * eps * m * l`` is at most ``k * eps * M * 2 * sqrt(3) * M`` for
-    ``M`` the largest finite coordinate (``m <= M``, and no edge is longer than
-    the cube ``[-M, M]^3``'s diagonal), so triangles with a larger cross
-    product are not flat and are skipped: usually nearly all of them.
-
-    Parameters
-    ----------
-    unique : (U, 3) float64
-    tris : (C, 3) int64
-    cross : (C, 3) float64
-    area2 : (C,) float64
-        Norms of ``cross``.
-    """
-    finite = np.isfinite(unique)
-    m = float(np.abs(unique[finite]).max()) if finite.any() else 0.0
-    bound = FLAT_ROUNDING_UNITS * np.finfo(np.float64).eps * m * (2.0 * np.sqrt(3.0) * m)
-    candidates = np.flatnonzero(area2 <= bound * (1.0 + 1e-9))
-    flat = np.zeros(len(tris), dtype=bool)
-    if len(candidates):
-        flat[candidates] = flat_triangles(unique, tris[candidates], cross[candidates])
-    return flat
 
 
 def _duplicate_triangles(tv, o1, o2, edge_manifold) -> list[list[int]]:

@@ -180,7 +180,7 @@ def extract(
         level = resolve_level(volume, level, on_status)
     placement_note = None
     if "vertex_offset" in extractor.options:
-        options["vertex_offset"], placement_note = _vertex_offset(
+        options["vertex_offset"], placement_note = _auto_vertex_offset(
             volume, float(level), options.get("vertex_offset")
         )
     mesh = extractor.run(
@@ -200,7 +200,9 @@ def extract(
     return mesh
 
 
-def _vertex_offset(volume: Volume, level: float, given: float | None) -> tuple[float, str | None]:
+def _auto_vertex_offset(
+    volume: Volume, level: float, given: float | None
+) -> tuple[float, str | None]:
     """The vertex offset to use, and a notice for the user (or None).
 
     ``given`` is used as it is, except None (automatic): then
