@@ -75,3 +75,43 @@ def flat_triangles(vertices: np.ndarray, cells: np.ndarray, cross: np.ndarray) -
         bound = FLAT_ROUNDING_UNITS * np.finfo(np.float64).eps * magnitude * longest
         flat[candidates] = norm[candidates] <= bound
     return flat
+
+
+def normalized_grid(grid: object) -> dict | None:
+    """A volume's grid as meshes record it (``info["grid"]``, a file header), or
+    None when ``grid`` is not a usable one.
+
+    Parameters
+    ----------
+    grid : object
+        ``{"shape": (nd,) int, "origin": (nd,) float, "affine": (nd, nd) float}``
+        with nd 2 or 3, whole sizes >= 1, finite numbers and an invertible affine.
+
+    Returns
+    -------
+    dict or None
+        Plain lists of Python ints and floats (``shape``, ``origin``,
+        ``affine``), so that JSON gives it back exactly.
+    """
+    if not isinstance(grid, dict):
+        return None
+    try:
+        sizes = np.asarray(grid["shape"], dtype=np.float64)
+        origin = np.asarray(grid["origin"], dtype=np.float64)
+        affine = np.asarray(grid["affine"], dtype=np.float64)
+    except (KeyError, TypeError, ValueError):
+        return None
+    nd = sizes.size
+    if (
+        sizes.shape != (nd,)
+        or nd not in (2, 3)
+        or any(isinstance(n, bool) for n in grid["shape"])
+        or not (np.isfinite(sizes).all() and (sizes >= 1).all() and (sizes % 1 == 0).all())
+        or origin.shape != (nd,)
+        or affine.shape != (nd, nd)
+        or not (np.isfinite(origin).all() and np.isfinite(affine).all())
+    ):
+        return None
+    if abs(np.linalg.det(affine)) <= 1e-12 * max(float(np.abs(affine).max()), 1e-300) ** nd:
+        return None
+    return {"shape": [int(n) for n in sizes], "origin": origin.tolist(), "affine": affine.tolist()}

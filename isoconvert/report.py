@@ -55,8 +55,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import FormatError, IsoconvertError
-from .geometry import flat_triangles, triangle_cross
+from .errors import FormatError, IsoconvertError, one_line
+from .geometry import flat_triangles, normalized_grid, triangle_cross
 from .graph import connected_components, group_sizes, row_groups
 from .mesh import Mesh
 
@@ -285,31 +285,18 @@ class _Frame:
 
 def _parse_grid(grid: dict, source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shape (nd,), origin (nd,) and invertible affine (nd, nd) of a grid dict."""
-    try:
-        shape = np.asarray(grid["shape"], dtype=np.float64)
-        origin = np.asarray(grid["origin"], dtype=np.float64)
-        affine = np.asarray(grid["affine"], dtype=np.float64)
-    except (KeyError, TypeError, ValueError) as exc:
+    clean = normalized_grid(grid)
+    if clean is None:
         raise FormatError(
-            f"{source}: the grid needs shape, origin and affine as numbers ({exc!s})"
-        ) from None
-    nd = shape.size
-    if (
-        shape.shape != (nd,)
-        or nd not in (2, 3)
-        or origin.shape != (nd,)
-        or affine.shape != (nd, nd)
-        or not (np.isfinite(origin).all() and np.isfinite(affine).all())
-        or not (shape >= 1).all()
-    ):
-        raise FormatError(
-            f"{source}: the grid's shape {shape.tolist()}, origin {origin.tolist()} and "
-            f"affine {affine.tolist()} do not fit together (expected 2 or 3 sizes, as many "
-            "origin coordinates and a square matrix of that size)"
+            f"{source}: the grid {one_line(grid, limit=200)} is not usable: it needs 2 or 3 "
+            "whole sizes >= 1, as many finite origin coordinates and an invertible square "
+            "affine of that size"
         )
-    if abs(np.linalg.det(affine)) <= 1e-12 * max(float(np.abs(affine).max()), 1e-300) ** nd:
-        raise FormatError(f"{source}: the grid's affine {affine.tolist()} is singular")
-    return shape, origin, affine
+    return (
+        np.asarray(clean["shape"], dtype=np.float64),
+        np.asarray(clean["origin"], dtype=np.float64),
+        np.asarray(clean["affine"], dtype=np.float64),
+    )
 
 
 # --- helpers -----------------------------------------------------------------------------

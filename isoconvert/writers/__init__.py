@@ -19,9 +19,9 @@ import numpy as np
 
 from ..atomic import atomic_output
 from ..errors import FormatError
+from ..geometry import normalized_grid
 from ..mesh import Mesh
 from ..registry import Registry
-from .header import normalized_grid
 from .obj import write_obj
 from .ply import write_ply
 from .precision import float32_loss

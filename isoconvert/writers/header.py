@@ -14,11 +14,11 @@ one comment line, ``isoconvert grid {compact JSON}``, in PLY and OBJ headers.
 from __future__ import annotations
 
 import json
-import math
 import numbers
 import re
 import unicodedata
 
+from ..geometry import normalized_grid
 from ..mesh import Mesh
 
 #: Comment text (after ``comment `` in PLY, ``# `` in OBJ) that starts the grid record.
@@ -124,63 +124,6 @@ def provenance(mesh: Mesh) -> list[str]:
         level = f"{level:.17g}" if isinstance(level, numbers.Real) else str(level)
         lines.append(f"method {info['method']} level {level}")
     return lines
-
-
-def normalized_grid(grid: object) -> dict | None:
-    """``grid`` as a file records it, or None when it is not a usable grid.
-
-    Parameters
-    ----------
-    grid : object
-        ``{"shape": (nd,) int, "origin": (nd,) float, "affine": (nd, nd) float}``
-        with nd 2 or 3, sizes >= 1, finite numbers and an invertible affine
-        (as ``mesh.info["grid"]`` of an extracted mesh).
-
-    Returns
-    -------
-    dict or None
-        Plain lists of Python ints and floats (``shape``, ``origin``,
-        ``affine``), so that JSON gives it back exactly.
-    """
-    if not isinstance(grid, dict):
-        return None
-    try:
-        shape = [_integer(n) for n in grid["shape"]]
-        origin = [float(x) for x in grid["origin"]]
-        affine = [[float(x) for x in row] for row in grid["affine"]]
-    except (KeyError, TypeError, ValueError):
-        return None
-    nd = len(shape)
-    if (
-        nd not in (2, 3)
-        or min(shape) < 1
-        or len(origin) != nd
-        or len(affine) != nd
-        or any(len(row) != nd for row in affine)
-        or not all(math.isfinite(x) for x in origin + [x for row in affine for x in row])
-    ):
-        return None
-    largest = max(max(abs(x) for row in affine for x in row), 1e-300)
-    if abs(_determinant(affine)) <= 1e-12 * largest**nd:
-        return None
-    return {"shape": shape, "origin": origin, "affine": affine}
-
-
-def _integer(value: object) -> int:
-    if isinstance(value, bool):
-        raise TypeError("a size is not a bool")
-    number = float(value)  # type: ignore[arg-type]
-    if not number.is_integer():
-        raise ValueError(f"{value!r} is not a whole number")
-    return int(number)
-
-
-def _determinant(matrix: list[list[float]]) -> float:
-    if len(matrix) == 2:
-        (a, b), (c, d) = matrix
-        return a * d - b * c
-    (a, b, c), (d, e, f), (g, h, i) = matrix
-    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
 
 
 def grid_comment(grid: object) -> str | None:
