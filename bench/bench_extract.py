@@ -24,6 +24,8 @@ DATASETS = Path(
 )
 SCANS = [
     ("engine_256x256x128_uint8.raw", 80.5),
+    # a level equal to samples: the automatic vertex offset (and its count of equal samples)
+    ("engine_256x256x128_uint8.raw", 80.0),
     ("embryo_256x256x256_uint8.raw", 60.5),
     ("tooth_103x94x161_uint8.raw", 100.5),
     ("hydrogen_vtk_64x64x64_float32.raw", 0.1001),
