@@ -8,10 +8,9 @@ import numpy as np
 
 from ..errors import FormatError
 from ..mesh import Mesh
-from .header import escape_comment
 from .text import write_rows
 
-#: The name on an ASCII STL's ``solid`` line (escaped like every header text).
+#: The name on an ASCII STL's ``solid`` line (no text from the mesh goes there).
 SOLID_NAME = "isoconvert"
 
 
@@ -37,8 +36,7 @@ def write_stl(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
     normals = mesh.triangle_normals().astype(np.float32)
     corners = np.asarray(mesh.vertices, dtype=np.float32)[mesh.cells]  # (C, 3, 3)
     if ascii:
-        solid = escape_comment(SOLID_NAME, ascii=True)
-        fh.write(f"solid {solid}\n".encode("ascii"))
+        fh.write(f"solid {SOLID_NAME}\n".encode("ascii"))
         rows = np.concatenate([normals, corners.reshape(-1, 9)], axis=1)
         facet = (
             "facet normal %.9g %.9g %.9g\n outer loop\n"
@@ -46,7 +44,7 @@ def write_stl(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
             + " endloop\nendfacet\n"
         )
         write_rows(fh, rows, facet)
-        fh.write(f"endsolid {solid}\n".encode("ascii"))
+        fh.write(f"endsolid {SOLID_NAME}\n".encode("ascii"))
         return
     header = b"binary STL written by isoconvert"
     fh.write(header.ljust(80, b" "))
