@@ -1,18 +1,79 @@
 """isoconvert: scalar volumes (raw, NRRD, TIFF) to isosurface meshes (OBJ, PLY, STL).
 
 The command line (``isoconvert``) is a thin shell over these functions.
+
+The public names are imported on first use (``isoconvert.read_volume``, or
+``from isoconvert import convert``), so that ``import isoconvert`` and the
+command line's help do not pay for numpy and the extraction kernels.
 """
+
+from __future__ import annotations
+
+import sys
+import types
+from importlib import import_module
+from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
 
-from .convert import ConvertOptions, ConvertResult, convert
-from .errors import IsoconvertError
-from .extract import EXTRACTORS, extract
-from .mesh import Mesh
-from .readers import READERS, ReadOptions, read_volume
-from .report import check_mesh
-from .volume import Volume
-from .writers import WRITERS, write_mesh
+#: Public name -> the module that defines it (relative to this package).
+_PUBLIC = {
+    "ConvertOptions": ".convert",
+    "ConvertResult": ".convert",
+    "convert": ".convert",
+    "IsoconvertError": ".errors",
+    "EXTRACTORS": ".extract",
+    "extract": ".extract",
+    "Mesh": ".mesh",
+    "READERS": ".readers",
+    "ReadOptions": ".readers",
+    "read_volume": ".readers",
+    "check_mesh": ".report",
+    "Volume": ".volume",
+    "WRITERS": ".writers",
+    "write_mesh": ".writers",
+}
+
+if TYPE_CHECKING:
+    from .convert import ConvertOptions, ConvertResult, convert
+    from .errors import IsoconvertError
+    from .extract import EXTRACTORS, extract
+    from .mesh import Mesh
+    from .readers import READERS, ReadOptions, read_volume
+    from .report import check_mesh
+    from .volume import Volume
+    from .writers import WRITERS, write_mesh
+
+
+def __getattr__(name: str) -> object:
+    if name not in _PUBLIC:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(_PUBLIC[name], __name__), name)
+    globals()[name] = value  # later look-ups are plain attribute reads
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_PUBLIC))
+
+
+class _Package(types.ModuleType):
+    """This package, keeping its functions ``convert`` and ``extract`` public.
+
+    Importing the submodule ``isoconvert.convert`` (or the subpackage
+    ``isoconvert.extract``) binds its name on this package, which would hide
+    the function of the same name once the names are no longer imported
+    eagerly. A submodule therefore never replaces an attribute of its name:
+    ``isoconvert.convert`` is the function, whatever was imported first.
+    """
+
+    def __setattr__(self, name: str, value: object) -> None:
+        if name in _PUBLIC and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package
 
 __all__ = [
     "EXTRACTORS",

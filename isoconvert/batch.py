@@ -24,11 +24,11 @@ from .convert import ConvertOptions
 from .errors import InputNotFoundError, IsoconvertError, OutputError
 from .quiet import silence_third_party
 from .readers import READERS, unsupported_format
-from .readers.tiff import TIFF_SUFFIXES, natural_key
+from .readers.stacks import TIFF_SUFFIXES, natural_key
 
 #: Bytes of working memory a conversion needs per byte of samples (a native-order
 #: or NaN-free copy at most, vertex and triangle arrays, the writer's records),
-#: plus a fixed part for the interpreter and numba.
+#: plus a fixed part for the interpreter and its libraries.
 MEMORY_FACTOR = 3
 MEMORY_BASE = 300 * 2**20
 

@@ -19,11 +19,16 @@ import typer
 
 from . import __version__
 from .atomic import check_output
+from .checks import CHECK_NAMES
 from .errors import IsoconvertError, VolumeError, one_line
-from .extract import EXTRACTORS, NO_DEGENERATE_OFFSET, SQUARE_AMBIGUITY_RULES
+from .methods import EXTRACTORS, NO_DEGENERATE_OFFSET, SQUARE_AMBIGUITY_RULES
 from .readers import READERS
-from .report import CHECK_NAMES
 from .writers import WRITERS
+
+# What the help, `formats` and `methods` need comes from numpy-free tables
+# (methods, checks, and the readers' and writers' registries); each command
+# imports the rest (numpy, the kernels, the parsers) when it runs, so that
+# `isoconvert --help` starts fast.
 
 
 class _HelpAsFlag:
@@ -33,6 +38,10 @@ class _HelpAsFlag:
         option = super().get_help_option(ctx)
         if option is not None:
             option.metavar = ""
+            # Absent, typer's help option is None, which typer coerces through
+            # pydantic (~50 ms to import); False is a bool, which it passes as
+            # is, so `formats` and `methods` need no pydantic.
+            option.default = False
         return option
 
 
@@ -135,21 +144,33 @@ OriginOpt = Annotated[
 ]
 
 
+#: Set by :func:`main`: with --debug, third-party warnings and log lines stay visible.
+_show_third_party = False
+
+
+def _quiet_third_party() -> None:
+    """Keep numpy's warnings and tifffile's log lines off stderr, unless --debug.
+
+    Called by the commands that read or compute, not by ``main``: it imports
+    numpy, which the help, ``formats`` and ``methods`` do without.
+    """
+    if not _show_third_party:
+        from .quiet import silence_third_party
+
+        silence_third_party()
+
+
 def _interactive() -> bool:
     """Progress displays only on a terminal, never in pipes, logs or CI."""
     return sys.stderr.isatty()
 
 
-#: Shown while numba compiles a kernel (first run, per method and sample type).
-COMPILE_HINT = "about 10-25 s, once per method and sample type; `isoconvert warmup` does it ahead"
-
-
 @contextmanager
-def _stage_display(quiet: bool, verbose: bool = False, hint: str = COMPILE_HINT):
+def _stage_display(quiet: bool, verbose: bool = False):
     """Yield ``(on_progress, on_status)`` for :func:`isoconvert.convert`.
 
-    On a terminal a spinner names the stage (reading, extracting, writing) and,
-    while numba compiles, why it waits; notices print above it. With
+    On a terminal a spinner names the stage (reading, extracting, writing);
+    notices print above it. With
     ``verbose``, a timed line per stage instead (also when not a terminal).
     Otherwise notices are plain lines on stderr.
     """
@@ -162,7 +183,7 @@ def _stage_display(quiet: bool, verbose: bool = False, hint: str = COMPILE_HINT)
         def stage_line(stage: str) -> None:
             print(f"{time.perf_counter() - start:7.2f} s  {stage}", file=sys.stderr)
 
-        yield (stage_line if verbose else None), _status(quiet, hint)
+        yield (stage_line if verbose else None), _status(quiet)
         return
     from rich.console import Console
 
@@ -170,23 +191,17 @@ def _stage_display(quiet: bool, verbose: bool = False, hint: str = COMPILE_HINT)
     with console.status("starting") as status:
 
         def on_status(message: str) -> None:
-            if message.startswith("compiling"):
-                status.update(f"{message} ({hint})...")
-            else:
-                console.print(message, markup=False, highlight=False)
+            console.print(message, markup=False, highlight=False)
 
         yield (lambda stage: status.update(f"{stage}...")), on_status
 
 
-def _status(quiet: bool, hint: str = COMPILE_HINT):
-    """Notices as plain lines on stderr (None when quiet); ``hint`` follows a
-    notice that a kernel is compiling."""
+def _status(quiet: bool):
+    """Notices as plain lines on stderr (None when quiet)."""
     if quiet:
         return None
 
     def say(message: str) -> None:
-        if message.startswith("compiling"):
-            message = f"{message} ({hint})"
         print(message, file=sys.stderr, flush=True)
 
     return say
@@ -328,6 +343,7 @@ def convert(
     allow_outside_data: AllowOutsideOpt = False,
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
+    _quiet_third_party()
     from .report import parse_requirements
 
     required = parse_requirements(require)
@@ -416,6 +432,7 @@ def check(
     allow_outside_data: AllowOutsideOpt = False,
 ) -> None:
     """Report on a mesh file: degenerate elements, holes, manifoldness, orientation, topology."""
+    _quiet_third_party()
     from .meshfile import read_mesh
     from .report import check_mesh, grid_from_volume, parse_requirements
 
@@ -520,8 +537,9 @@ def batch(
     ] = False,
 ) -> None:
     """Convert many volumes: files, folders (--recursive) and globs, in parallel."""
+    _quiet_third_party()
     from . import batch as batching
-    from .readers.tiff import natural_text_key
+    from .readers.stacks import natural_text_key
     from .report import parse_requirements
 
     required = parse_requirements(require)
@@ -746,6 +764,7 @@ def info(
     allow_outside_data: AllowOutsideOpt = False,
 ) -> None:
     """Describe a volume (size, spacing, value range, histogram) and suggest isovalues."""
+    _quiet_third_party()
     from .readers import read_volume
     from .stats import histogram, suggested_levels
 
@@ -827,42 +846,6 @@ def _text_histogram(hist, rows: int = 12, width: int = 40) -> list[str]:
 
 
 @app.command(cls=_Command)
-def warmup(
-    methods: Annotated[
-        str,
-        typer.Option(help="Comma-separated methods to compile: cubes, tetra, squares, or all."),
-    ] = "cubes",
-    dtypes: Annotated[
-        str,
-        typer.Option(
-            help="Comma-separated sample types (uint8, int16, uint16, float32, ...), or all."
-        ),
-    ] = "uint8,int16,uint16,float32",
-    quiet: Annotated[bool, _flag("--quiet", "-q", help="Print only errors.")] = False,
-) -> None:
-    """Compile the extraction kernels ahead of time (batch jobs and CI then start at once)."""
-    from .extract.kernels import cache_folder
-    from .extract.warmup import COMPILED_METHODS
-    from .extract.warmup import warmup as run_warmup
-    from .volume import SUPPORTED_DTYPES
-
-    chosen_methods = _choices(methods, COMPILED_METHODS)
-    chosen_dtypes = _choices(dtypes, SUPPORTED_DTYPES)
-    with _stage_display(quiet, hint="about 10-25 s each") as (_, on_status):
-        done = run_warmup(chosen_methods, chosen_dtypes, on_status=on_status)
-    if not quiet:
-        for item in done:
-            how = "compiled" if item.compiled else "already cached"
-            print(f"{item.method:<8} {item.dtype:<8} {how} ({item.seconds:.1f} s)")
-        print(f"cache: {cache_folder()}")
-
-
-def _choices(text: str, known: tuple[str, ...]) -> list[str]:
-    names = [n.strip() for n in text.split(",") if n.strip()]
-    return list(known) if names == ["all"] else names
-
-
-@app.command(cls=_Command)
 def formats() -> None:
     """List input formats, output formats and extraction methods."""
     print("input formats:")
@@ -882,9 +865,12 @@ def methods() -> None:
 
 
 def _print_methods() -> None:
+    # What is installed now: the plugins found when the help was built may have
+    # changed since in a long-lived process (a notebook calling main()).
+    EXTRACTORS.reload_plugins()
     for name in EXTRACTORS.names():
         try:
-            summary = EXTRACTORS.get(name).summary
+            summary = EXTRACTORS.summary(name)
         except IsoconvertError as exc:
             summary = f"(broken plugin: {exc})"
         print(f"  {name:<8} {summary}")
@@ -927,12 +913,10 @@ def _is_number(text: str) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``isoconvert`` command; returns the exit code."""
+    global _show_third_party
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
-    if not debug:
-        from .quiet import silence_third_party
-
-        silence_third_party()  # numpy warnings and tifffile's log lines are not for users
+    _show_third_party = debug  # numpy warnings and tifffile's log lines are not for users
     args = gather_multi_values([a for a in args if a != "--debug"])
     try:
         app(args=args, prog_name="isoconvert", standalone_mode=True)

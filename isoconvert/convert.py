@@ -13,7 +13,8 @@ from .extract import extract
 from .mesh import Mesh
 from .readers import ReadOptions, read_volume
 from .volume import Volume
-from .writers import WRITERS, output_format, stored_mesh, write_mesh
+from .writers import WRITERS, output_format
+from .writers.stored import stored_mesh, write_mesh
 
 _READ_FIELDS = frozenset(f.name for f in fields(ReadOptions))
 

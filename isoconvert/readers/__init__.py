@@ -6,20 +6,27 @@ import glob as globlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import FormatError, InputNotFoundError, IsoconvertError, VolumeError, one_line
+from ..lazy import LazyFunction
 from ..registry import Registry
-from ..volume import Volume
-from .image import IMAGE_SUFFIXES, read_image
-from .nrrd import read_nrrd
 from .options import ReadOptions
-from .raw import read_raw
-from .tiff import TIFF_SUFFIXES, natural_key, read_tiff
+from .stacks import TIFF_SUFFIXES, natural_key
+
+if TYPE_CHECKING:
+    from ..volume import Volume
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".gif")
 
 
 @dataclass(frozen=True)
 class Reader:
-    """A volume format: how to recognise it and how to read it."""
+    """A volume format: how to recognise it and how to read it.
+
+    The built-ins' ``read`` is a :class:`~isoconvert.lazy.LazyFunction`: the
+    table describes every format without importing numpy or any parser.
+    """
 
     name: str
     summary: str
@@ -38,7 +45,7 @@ READERS.register(
         "raw",
         "headerless samples, x fastest; --shape/--dtype or a name_XxYxZ_dtype.raw name",
         (".raw", ".bin", ".dat"),
-        read_raw,
+        LazyFunction("isoconvert.readers.raw:read_raw"),
         frozenset({"shape", "dtype", "endian", "header_bytes"}),
     ),
 )
@@ -48,7 +55,7 @@ READERS.register(
         "nrrd",
         "NRRD, attached (.nrrd) or detached (.nhdr), raw/gzip/bzip2, multi-file data",
         (".nrrd", ".nhdr"),
-        read_nrrd,
+        LazyFunction("isoconvert.readers.nrrd:read_nrrd"),
         frozenset({"channel", "allow_outside_data"}),
     ),
 )
@@ -58,7 +65,7 @@ READERS.register(
         "tiff",
         "multi-page TIFF, or a folder or glob of single-page slices",
         TIFF_SUFFIXES,
-        read_tiff,
+        LazyFunction("isoconvert.readers.tiff:read_tiff"),
         frozenset({"channel"}),
         stacks=True,
     ),
@@ -69,7 +76,7 @@ READERS.register(
         "image",
         "2D images (PNG, JPEG, BMP, GIF) via Pillow; colour becomes gray unless --channel",
         IMAGE_SUFFIXES,
-        read_image,
+        LazyFunction("isoconvert.readers.image:read_image"),
         frozenset({"channel"}),
     ),
 )

@@ -10,8 +10,6 @@ from ..errors import FormatError, VolumeError, one_line
 from ..volume import Volume
 from .options import ReadOptions
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".gif")
-
 
 def read_image(path: Path, options: ReadOptions) -> Volume:
     """Read a 2D image; colour images become gray unless ``channel`` picks a band.

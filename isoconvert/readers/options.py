@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from ..errors import VolumeError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 @dataclass(frozen=True)
@@ -63,4 +65,5 @@ def select_channel(
         raise VolumeError(f"{path}: {n} {what}; choose one with --channel 0..{n - 1}")
     if not 0 <= channel < n:
         raise VolumeError(f"{path}: --channel {channel} is out of range 0..{n - 1}")
-    return np.take(array, channel, axis=axis)
+    # the method np.take calls: ReadOptions users (the CLI) need not import numpy
+    return array.take(channel, axis=axis)

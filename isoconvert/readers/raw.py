@@ -99,8 +99,7 @@ def read_raw(path: Path, options: ReadOptions) -> Volume:
             f"with {options.header_bytes} header bytes needs {expected}; "
             "check --shape, --dtype and --header-bytes"
         )
-    # Mode "c" (copy-on-write) maps the file without reading it and gives a writeable
-    # array, which keeps numba to one specialization per dtype; the file is never changed.
+    # Mode "c" (copy-on-write) maps the file without reading it; the file is never changed.
     data = np.asarray(
         np.memmap(path, dtype=dtype, mode="c", offset=options.header_bytes, shape=shape[::-1])
     )

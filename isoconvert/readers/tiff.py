@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import glob as globlib
-import re
 from pathlib import Path
 
 import numpy as np
@@ -12,18 +11,7 @@ from ..errors import FormatError, InputNotFoundError, VolumeError, one_line
 from ..memory import check_fits
 from ..volume import Volume
 from .options import ReadOptions, select_channel
-
-TIFF_SUFFIXES = (".tif", ".tiff")
-
-
-def natural_key(path: Path) -> list:
-    """Sort key putting slice2 before slice10."""
-    return natural_text_key(path.name)
-
-
-def natural_text_key(text: str) -> list:
-    """Sort key comparing runs of digits as numbers ("a2/b" before "a10/b")."""
-    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", text)]
+from .stacks import TIFF_SUFFIXES, natural_key
 
 
 def slice_files(spec: str) -> list[Path]:

@@ -1,0 +1,56 @@
+"""The extraction methods by name: the registry, without importing the methods.
+
+The CLI builds its help and its ``methods`` listing from here, so neither
+imports numpy nor the kernels; :mod:`isoconvert.extract` holds the methods
+themselves and is imported when one is first used. Third-party methods
+register under the entry-point group :data:`PLUGIN_GROUP` (see
+:mod:`isoconvert.extract` for the contract).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from .lazy import LazyFunction
+from .registry import Registry
+
+if TYPE_CHECKING:
+    from .extract import Extractor
+
+PLUGIN_GROUP = "isoconvert.extractors"
+#: The vertex offset ``--no-degenerate`` uses: vertices keep a thousandth of
+#: their edge's length from grid vertices.
+NO_DEGENERATE_OFFSET = 1e-3
+#: Rules for the ambiguous faces of cubes (the first is the default).
+AMBIGUITY_RULES = ("separate-positive", "separate-negative")
+#: Rules for ambiguous squares: those of cubes, and the asymptotic decider.
+SQUARE_AMBIGUITY_RULES = (*AMBIGUITY_RULES, "asymptotic")
+
+EXTRACTORS: Registry[Extractor] = Registry(
+    "extraction method",
+    plugin_group=PLUGIN_GROUP,
+    adapt=LazyFunction("isoconvert.extract:_from_plugin"),
+)
+EXTRACTORS.declare(
+    "cubes",
+    "isoconvert.extract:CUBES",
+    summary="Marching Cubes (3D): triangles; watertight closed surfaces; table derived in code",
+)
+EXTRACTORS.declare(
+    "tetra",
+    "isoconvert.extract:TETRA",
+    summary="Marching Tetrahedra (3D): six tetrahedra per cube, no ambiguous cases, more triangles",
+)
+EXTRACTORS.declare(
+    "squares",
+    "isoconvert.extract:SQUARES",
+    summary="Marching Squares (2D images, or every slice of a 3D volume across --axis): segments",
+)
+
+__all__ = [
+    "AMBIGUITY_RULES",
+    "EXTRACTORS",
+    "NO_DEGENERATE_OFFSET",
+    "PLUGIN_GROUP",
+    "SQUARE_AMBIGUITY_RULES",
+]

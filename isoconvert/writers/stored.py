@@ -1,0 +1,188 @@
+"""What a file of each format stores (:func:`stored_mesh`), and writing it (:func:`write_mesh`).
+
+One code path decides the stored precision, STL's three vertices per
+triangle and which header records the grid; see :mod:`isoconvert.writers`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import atomic_output
+from ..errors import FormatError
+from ..geometry import normalized_grid
+from ..mesh import Mesh
+from . import WRITERS, Writer, output_format
+from .precision import float32_loss
+
+
+def _check_cells(writer: Writer, mesh: Mesh, name: str | Path) -> None:
+    size = mesh.cells.shape[1]
+    if size not in writer.cell_sizes:
+        kind = {2: "contour segments", 3: "triangles"}.get(size, f"{size}-vertex cells")
+        fits = [n for n, w in WRITERS.items() if size in w.cell_sizes]
+        raise FormatError(f"{name}: {writer.name} cannot hold {kind}; write {' or '.join(fits)}")
+    cells = np.asarray(mesh.cells)
+    n = len(mesh.vertices)
+    if cells.size and (cells.min() < 0 or cells.max() >= n):
+        bad = (cells < 0) | (cells >= n)
+        row = int(np.flatnonzero(bad.any(axis=1))[0])
+        index = int(cells[row][bad[row]][0])
+        kind = "triangle" if size == 3 else "segment"
+        raise FormatError(
+            f"{name}: {kind} {row} of the mesh refers to vertex {index}, "
+            f"but the mesh has {n} vertices"
+        )
+
+
+def _stored(
+    writer: Writer, mesh: Mesh, on_status: Callable[[str], None] | None, expand: bool = True
+) -> Mesh:
+    """The one code path behind :func:`stored_mesh` and :func:`write_mesh`.
+
+    With ``expand=False`` a format that ``expands`` gets its vertices rounded
+    and only those cells use, still indexed: its writer expands them (as
+    ``vertices[cells]``, which leaves an expanded mesh as it is), without a
+    float64 copy of three vertices per triangle.
+    """
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    cells = np.asarray(mesh.cells, dtype=np.int64)
+    kind = "triangles" if cells.shape[1] == 3 else "segments"
+    if writer.expands and len(cells):
+        # only the vertices that cells use reach the file
+        used = np.zeros(len(vertices), dtype=bool)
+        used[cells.ravel()] = True
+        if not used.all():
+            renumber = np.cumsum(used) - 1
+            vertices, cells = vertices[used], renumber[cells]
+    elif writer.expands:
+        vertices = vertices[:0]
+    precision = writer.precision
+    if precision == "adaptive":
+        loss = float32_loss(vertices, cells, count_degenerate=False)
+        precision = "float64" if loss.any else "float32"
+        if loss.any and on_status:
+            on_status(
+                f"note: vertex coordinates written as double: in float32, {loss.describe(kind)}"
+            )
+    elif precision == "float32":
+        loss = float32_loss(vertices, cells)
+        if loss.any and on_status:
+            on_status(
+                f"note: {writer.name.upper()} stores float32: {loss.describe(kind)} at that "
+                "precision; write PLY (which then stores doubles) or OBJ, or move the origin "
+                "nearer the mesh"
+            )
+    if precision == "float32":
+        with np.errstate(over="ignore", invalid="ignore"):
+            vertices = vertices.astype(np.float32).astype(np.float64)
+    info = {k: v for k, v in mesh.info.items() if k not in ("grid", "stored_precision")}
+    if writer.records_grid:
+        grid = normalized_grid(mesh.info.get("grid"))
+        if grid is not None:
+            info["grid"] = grid
+    if precision in ("float32", "float64"):
+        info["stored_precision"] = precision
+    if writer.expands and expand:
+        vertices = vertices[cells].reshape(-1, 3)
+        cells = np.arange(len(vertices), dtype=np.int64).reshape(-1, cells.shape[1])
+    return Mesh(vertices, cells, None, info)
+
+
+def stored_mesh(
+    mesh: Mesh,
+    format: str,
+    ascii: bool = False,
+    *,
+    on_status: Callable[[str], None] | None = None,
+) -> Mesh:
+    """The mesh exactly as a file of ``format`` written by :func:`write_mesh` holds it.
+
+    Check this, not the extracted mesh, to judge what was written:
+    ``check_mesh(stored_mesh(mesh, "ply"))`` agrees with
+    ``check_mesh(read_mesh("mesh.ply"))`` (but for the source name).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        ``vertices (V, 3)``, ``cells (C, 3)`` or ``(C, 2)``.
+    format : str
+        A writer name: ``ply``, ``obj``, ``stl`` or ``svg``.
+    ascii : bool
+        Text instead of binary; the stored values are the same either way
+        (text PLY and STL carry enough digits to give them back exactly).
+    on_status : callable or None
+        Receives a one-line notice when the format's precision loses something
+        (STL) or PLY stores doubles because float32 would have.
+
+    Returns
+    -------
+    Mesh
+        ``vertices (V', 3) float64`` holding values of the stored precision
+        (float32 values for STL and for PLY unless float32 would merge
+        vertices or make cells degenerate; float64 for OBJ and PLY
+        otherwise); ``cells`` as the file lists them (STL: ``(C, 3)`` =
+        ``arange(3 C)``, three vertices per triangle, only the vertices of
+        triangles). ``edge_ids`` is None. ``info`` is ``mesh.info`` with
+        ``stored_precision`` ("float32" or "float64"; SVG, a picture, has
+        none) and with ``grid`` only where the format records it (PLY, OBJ),
+        normalized to plain lists.
+
+    Raises
+    ------
+    FormatError
+        Unknown format, or cells it cannot hold.
+    """
+    writer = WRITERS.get(format)
+    _check_cells(writer, mesh, writer.name)
+    return _stored(writer, mesh, on_status)
+
+
+def write_mesh(
+    mesh: Mesh,
+    path: str | Path,
+    *,
+    format: str | None = None,
+    ascii: bool = False,
+    force: bool = False,
+    on_status: Callable[[str], None] | None = None,
+) -> Path:
+    """Write ``mesh`` to ``path`` atomically (a temporary file, then a rename).
+
+    The file holds :func:`stored_mesh` ``(mesh, format, ascii)``: PLY vertex
+    coordinates are ``float`` unless float32 would merge distinct vertices or
+    make triangles (segments) degenerate, then ``double``; STL is always
+    float32. PLY and OBJ headers record where the mesh came from (escaped,
+    one line each) and the grid (``mesh.info["grid"]``).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        ``vertices (V, 3)``, ``cells (C, 3)`` or ``(C, 2)``.
+    path : str or Path
+    format : str or None
+        ``ply``, ``obj``, ``stl`` or ``svg``; None takes it from the suffix.
+    ascii : bool
+        Text instead of binary for PLY and STL (OBJ is always text).
+    force : bool
+        Overwrite an existing file.
+    on_status : callable or None
+        Receives one-line notices: PLY chose double coordinates, or STL's
+        float32 merges vertices or makes triangles degenerate.
+
+    Returns
+    -------
+    Path
+    """
+    writer = output_format(path, format)
+    _check_cells(writer, mesh, path)
+    stored = _stored(writer, mesh, on_status, expand=False)
+    with atomic_output(path, force) as fh:
+        writer.write(stored, fh, ascii or not writer.has_binary)
+    return Path(path)
+
+
+__all__ = ["stored_mesh", "write_mesh"]
