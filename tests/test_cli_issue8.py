@@ -1,5 +1,5 @@
 """What a new user hit (issue 8), through the command line: special output
-files, output folders, --nan-as, integer levels, flags in help, warmup."""
+files, output folders, --nan-as, integer levels, flags in help."""
 
 from __future__ import annotations
 
@@ -131,7 +131,7 @@ def test_integer_level_report_is_clean_by_default(tmp_path, capsys):
     assert code == 4
 
 
-@pytest.mark.parametrize("command", ["convert", "check", "batch", "info", "warmup"])
+@pytest.mark.parametrize("command", ["convert", "check", "batch", "info"])
 def test_help_shows_flags_as_flags(capsys, command, monkeypatch):
     monkeypatch.setenv("COLUMNS", "200")
     code = main([command, "--help"])
@@ -144,22 +144,6 @@ def test_help_shows_flags_as_flags(capsys, command, monkeypatch):
     if command in ("convert", "batch", "info", "check"):
         shape = next(line for line in out.splitlines() if "--shape" in line)
         assert "(and z)" in shape  # not eaten as rich markup, as "[z]" was
-
-
-def test_warmup_compiles_then_finds_the_cache(capsys):
-    code = main(["warmup", "--methods", "squares", "--dtypes", "uint8"])
-    out = capsys.readouterr().out
-    assert code == 0
-    assert "squares" in out and "uint8" in out and "cache:" in out
-    code = main(["warmup", "--methods", "squares", "--dtypes", "uint8"])
-    out = capsys.readouterr().out
-    assert "already cached" in out
-
-
-def test_warmup_refuses_unknown_names(capsys):
-    code = main(["warmup", "--dtypes", "float16"])
-    err = capsys.readouterr().err
-    assert code == 1 and "float16" in err
 
 
 def test_check_grid_judges_holes_against_the_volume_grid(tmp_path, capsys):

@@ -201,3 +201,14 @@ def test_no_diagonal_lies_in_a_cube_face(rule):
             for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
                 if frozenset((a, b)) not in sides:
                     assert not faces(a) & faces(b), (config, t)
+
+
+@pytest.mark.parametrize("rule", ["separate-positive", "separate-negative"])
+def test_stored_cube_tables_equal_the_derivation(rule):
+    """cube_tables.py is generated; it must stay what the face walk derives."""
+    from isoconvert.extract.tables import derive_marching_cubes_table
+
+    stored_counts, stored = marching_cubes_table(rule)
+    counts, derived = derive_marching_cubes_table(rule)
+    assert np.array_equal(stored_counts, counts)
+    assert np.array_equal(stored, derived)

@@ -26,18 +26,13 @@ import numpy as np
 
 from ..errors import IsoconvertError
 from ..mesh import Mesh
-from ..registry import Registry
+from ..methods import EXTRACTORS, NO_DEGENERATE_OFFSET, PLUGIN_GROUP
 from ..volume import Volume
 from .cubes import marching_cubes
-from .prepare import count_equal
+from .prepare import count_equal, resolve_vertex_offset
 from .squares import SQUARE_AMBIGUITY_RULES, marching_squares
 from .tables import AMBIGUITY_RULES, DEFAULT_AMBIGUITY
 from .tetra import marching_tetrahedra
-
-PLUGIN_GROUP = "isoconvert.extractors"
-#: The vertex offset ``--no-degenerate`` uses: vertices keep a thousandth of
-#: their edge's length from grid vertices.
-NO_DEGENERATE_OFFSET = 1e-3
 
 
 @dataclass(frozen=True)
@@ -57,6 +52,11 @@ class Extractor:
         Ambiguity rules it accepts (the first is its default).
     options : frozenset of str
         Extra keyword options it takes (e.g. ``axis``).
+    prepared : bool
+        It validates its input with :func:`~isoconvert.extract.prepare.prepare`,
+        which also resolves ``vertex_offset=None`` and records the offset used in
+        ``mesh.info``; its result is trusted. False (plugins): :func:`extract`
+        resolves the offset beforehand and checks the result.
     """
 
     name: str
@@ -65,6 +65,7 @@ class Extractor:
     run: Callable[..., Mesh]
     ambiguity: tuple[str, ...] = (DEFAULT_AMBIGUITY,)
     options: frozenset[str] = field(default_factory=frozenset)
+    prepared: bool = False
 
 
 def _from_plugin(name: str, obj: object) -> Extractor:
@@ -76,40 +77,32 @@ def _from_plugin(name: str, obj: object) -> Extractor:
     raise IsoconvertError(f"extractor plugin {name!r} is neither an Extractor nor a function")
 
 
-EXTRACTORS: Registry[Extractor] = Registry(
-    "extraction method", plugin_group=PLUGIN_GROUP, adapt=_from_plugin
-)
-EXTRACTORS.register(
+# The built-ins, which :data:`isoconvert.methods.EXTRACTORS` names and loads on first use.
+CUBES = Extractor(
     "cubes",
-    Extractor(
-        "cubes",
-        "Marching Cubes (3D): triangles; watertight closed surfaces; table derived in code",
-        (3,),
-        marching_cubes,
-        AMBIGUITY_RULES,
-        frozenset({"vertex_offset"}),
-    ),
+    EXTRACTORS.summary("cubes"),
+    (3,),
+    marching_cubes,
+    AMBIGUITY_RULES,
+    frozenset({"vertex_offset"}),
+    prepared=True,
 )
-EXTRACTORS.register(
+TETRA = Extractor(
     "tetra",
-    Extractor(
-        "tetra",
-        "Marching Tetrahedra (3D): six tetrahedra per cube, no ambiguous cases, more triangles",
-        (3,),
-        marching_tetrahedra,
-        options=frozenset({"vertex_offset"}),
-    ),
+    EXTRACTORS.summary("tetra"),
+    (3,),
+    marching_tetrahedra,
+    options=frozenset({"vertex_offset"}),
+    prepared=True,
 )
-EXTRACTORS.register(
+SQUARES = Extractor(
     "squares",
-    Extractor(
-        "squares",
-        "Marching Squares (2D images, or every slice of a 3D volume across --axis): segments",
-        (2, 3),
-        marching_squares,
-        SQUARE_AMBIGUITY_RULES,
-        frozenset({"axis", "vertex_offset"}),
-    ),
+    EXTRACTORS.summary("squares"),
+    (2, 3),
+    marching_squares,
+    SQUARE_AMBIGUITY_RULES,
+    frozenset({"axis", "vertex_offset"}),
+    prepared=True,
 )
 
 
@@ -179,9 +172,11 @@ def extract(
     if isinstance(level, str):
         level = resolve_level(volume, level, on_status)
     placement_note = None
-    if "vertex_offset" in extractor.options:
-        options["vertex_offset"], placement_note = _auto_vertex_offset(
-            volume, float(level), options.get("vertex_offset")
+    if "vertex_offset" in extractor.options and not extractor.prepared:
+        given = options.get("vertex_offset")
+        equal = count_equal(volume.data, level) if given in (None, 0) else 0
+        options["vertex_offset"], placement_note = resolve_vertex_offset(
+            volume.data.dtype, float(level), given, equal
         )
     mesh = extractor.run(
         volume,
@@ -192,51 +187,13 @@ def extract(
         on_status=on_status,
         **options,
     )
-    _check_result(name, mesh)
-    if "vertex_offset" in options:
-        mesh.info["vertex_offset"] = options["vertex_offset"]
+    if not extractor.prepared:
+        _check_result(name, mesh)
+        if "vertex_offset" in options:
+            mesh.info["vertex_offset"] = options["vertex_offset"]
     if placement_note and on_status:  # only once the level proved usable
         on_status(placement_note)
     return mesh
-
-
-def _auto_vertex_offset(
-    volume: Volume, level: float, given: float | None
-) -> tuple[float, str | None]:
-    """The vertex offset to use, and a notice for the user (or None).
-
-    ``given`` is used as it is, except None (automatic): then
-    :data:`NO_DEGENERATE_OFFSET` when some sample equals the level, else 0.
-    With the sign rule (positive when value >= level) the connectivity at a
-    level equal to sample values is that of a level a hair below, so keeping
-    vertices a thousandth of their edge away from those samples changes no
-    count (vertices and triangles stay equal to VTK's) and removes every
-    zero-length edge and collapsed triangle.
-    """
-    if given is not None and given != 0:
-        return given, None
-    equal = count_equal(volume.data, level) if np.isfinite(level) else 0
-    if not equal:
-        return 0.0, None
-    samples = f"{equal:,} sample{'s' if equal > 1 else ''}"
-    if given is None:
-        return NO_DEGENERATE_OFFSET, (
-            f"level {level:g} equals {samples}: the vertices there are kept "
-            f"{NO_DEGENERATE_OFFSET:g} of an edge away from them, so the mesh has no "
-            "zero-length edges (--exact-placement puts them on the samples)"
-        )
-    between = _between_levels(volume.data, level)
-    return given, (
-        f"level {level:g} equals {samples}: expect zero-length edges and degenerate cells "
-        f"there; use --level {between:g}, or drop --exact-placement"
-    )
-
-
-def _between_levels(data: np.ndarray, level: float) -> float:
-    """A level just below ``level`` that no sample of an integer type can equal."""
-    if np.issubdtype(data.dtype, np.integer) or data.dtype == np.bool_:
-        return level - 0.5
-    return float(np.nextafter(level, -np.inf))
 
 
 def _check_result(name: str, mesh: object) -> None:

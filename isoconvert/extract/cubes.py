@@ -1,17 +1,23 @@
-"""Marching Cubes (Wenger, *Isosurfaces*, section 2.3)."""
+"""Marching Cubes (Wenger, *Isosurfaces*, section 2.3), in the manner of Flying Edges.
+
+The kernel is C++ (src/cubes.cpp): a first pass reads every sample once (see
+:func:`~isoconvert.extract.prepare.prepare`), a counting pass and a filling
+pass then visit only the stretch of each row of cubes where the surface can
+be, in parallel, writing straight into the output arrays.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..mesh import Mesh
 from ..volume import Volume
-from .jit import compile_notice
-from .placement import finish_mesh
-from .prepare import check_level, check_vertex_offset, kernel_array
-from .tables import DEFAULT_AMBIGUITY, EDGE_AXIS, EDGE_BASE, marching_cubes_table
+from .placement import mesh_info, reversed_orientation
+from .prepare import prepare
+from .tables import DEFAULT_AMBIGUITY, marching_cubes_table
 
 
 def marching_cubes(
@@ -21,7 +27,7 @@ def marching_cubes(
     flip: bool = False,
     ambiguity: str = DEFAULT_AMBIGUITY,
     nan_as: float | None = None,
-    vertex_offset: float = 0.0,
+    vertex_offset: float | None = None,
     on_status: Callable[[str], None] | None = None,
 ) -> Mesh:
     """Extract the isosurface of a 3D volume with Marching Cubes.
@@ -39,47 +45,117 @@ def marching_cubes(
         or "separate-negative"; see :mod:`isoconvert.extract.tables`.
     nan_as : float or None
         Treat NaN/Inf samples as this value; None makes them an error.
-    vertex_offset : float
+    vertex_offset : float or None
         Keep every vertex at least this fraction of its edge's length away from
-        the edge's ends (0 <= f < 0.5). With f > 0, a level equal to grid values
-        gives no zero-length edges (see :func:`check_vertex_offset`).
+        the edge's ends (0 <= f < 0.5); None chooses (see
+        :func:`~isoconvert.extract.prepare.resolve_vertex_offset`).
     on_status : callable or None
-        Receives one-line notices (e.g. that numba is compiling).
+        Receives one-line notices.
 
     Returns
     -------
     Mesh
         ``vertices (V, 3) float64`` in world units, ``cells (C, 3) int64``,
-        ``edge_ids (V,) int64``. Normals point from the positive to the negative
-        side, i.e. out of bright objects.
+        ``edge_ids (V,) int64`` (``3 * (i + X * (j + Y * k)) + axis``). Normals
+        point from the positive to the negative side, i.e. out of bright
+        objects. Vertices come row of samples by row (``j + Y * k``), within a
+        row x-edges, then y-edges, then z-edges, each by increasing x; triangles
+        cube row by cube row, by increasing x: the order follows from the grid
+        alone, whatever the number of threads.
     """
-    arr, stats = kernel_array(volume, 3, "cubes", nan_as=nan_as, on_status=on_status)
-    level = check_level(level, stats, volume.source)
-    offset = check_vertex_offset(vertex_offset)
-    counts, table = marching_cubes_table(ambiguity)
-    notice = f"compiling the Marching Cubes kernel for {arr.dtype} data (first run only)"
-    with compile_notice(on_status, notice):
-        from .kernels.cubes import count_cubes, fill_cubes
+    prep = prepare(
+        volume, 3, "cubes", level, nan_as=nan_as, vertex_offset=vertex_offset, on_status=on_status
+    )
+    block = CubesBlock(
+        affine=volume.affine,
+        origin=volume.origin,
+        grid_shape=volume.shape,
+        offset=prep.offset,
+        ambiguity=ambiguity,
+        reverse=reversed_orientation(volume, flip),
+        threads=prep.threads,
+    )
+    verts, edge_ids, tris = block.extract(prep.array, prep.scan)
+    return Mesh(verts, tris, edge_ids, mesh_info(volume, "cubes", prep.level, flip, prep.offset))
 
-        per_slab_vertices, per_slab_triangles = count_cubes(arr, level, counts)
-        # where each slab's output begins, so slabs fill in parallel
-        vert_start = np.concatenate([[0], np.cumsum(per_slab_vertices)])
-        tri_start = np.concatenate([[0], np.cumsum(per_slab_triangles)])
-        verts = np.empty((vert_start[-1], 3), dtype=np.float64)
-        edge_ids = np.empty(vert_start[-1], dtype=np.int64)
-        tris = np.empty((tri_start[-1], 3), dtype=np.int64)
-        fill_cubes(
-            arr,
-            level,
-            offset,
+
+@dataclass(frozen=True)
+class CubesBlock:
+    """Marching Cubes on one block of a grid, with global positions and edge ids.
+
+    A block is a brick of samples (z, y and x ranges) with a one-sample overlap
+    on the high side of each cut; its vertices come out in world units and with
+    the edge ids of the whole grid, so blocks merge by id with no welding.
+    Called on the whole grid (``index_origin`` 0) it gives the whole mesh.
+
+    Attributes
+    ----------
+    affine : (3, 3) float64
+        Index offsets to world offsets (:attr:`Volume.affine`).
+    origin : (3,) float64
+        World position of the grid's sample (0, 0, 0).
+    grid_shape : (3,) int
+        (X, Y, Z) of the whole grid, for edge ids.
+    offset : float
+        Vertex offset (see :func:`~isoconvert.extract.prepare.resolve_vertex_offset`).
+    ambiguity : str
+    reverse : bool
+        Write triangles in reverse orientation.
+    threads : int
+    """
+
+    affine: np.ndarray
+    origin: np.ndarray
+    grid_shape: tuple[int, int, int]
+    offset: float = 0.0
+    ambiguity: str = DEFAULT_AMBIGUITY
+    reverse: bool = False
+    threads: int = 1
+
+    def extract(
+        self, samples: np.ndarray, scan: object, index_origin: tuple[int, int, int] = (0, 0, 0)
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Vertices, edge ids and triangles of one block.
+
+        Parameters
+        ----------
+        samples : (Z, Y, X) array
+            The block's samples, as :func:`~isoconvert.extract.prepare.prepare` makes them.
+        scan : isoconvert._native.RowScan
+            ``_native.scan_rows`` of ``samples`` at the level.
+        index_origin : (3,) int
+            Grid index (i, j, k) of ``samples[0, 0, 0]``.
+
+        Returns
+        -------
+        vertices : (V, 3) float64
+        edge_ids : (V,) int64
+            ``3 * (i + X * (j + Y * k)) + axis`` in the whole grid.
+        triangles : (C, 3) int64
+            Indices into this block's vertices.
+        """
+        from .. import _native
+
+        counts, table = marching_cubes_table(self.ambiguity)
+        n = _native.count_cubes(samples, scan, counts, table, self.threads)
+        verts = np.empty((n.vertices, 3), dtype=np.float64)
+        edge_ids = np.empty(n.vertices, dtype=np.int64)
+        tris = np.empty((n.triangles, 3), dtype=np.int64)
+        _native.fill_cubes(
+            samples,
+            scan,
+            n,
             counts,
             table,
-            EDGE_BASE,
-            EDGE_AXIS,
-            vert_start,
-            tri_start,
+            np.ascontiguousarray(self.affine, dtype=np.float64),
+            np.ascontiguousarray(self.origin, dtype=np.float64),
+            np.asarray(index_origin, dtype=np.int64),
+            np.asarray(self.grid_shape[:2], dtype=np.int64),
+            self.offset,
+            self.reverse,
+            self.threads,
             verts,
             edge_ids,
             tris,
         )
-    return finish_mesh(volume, verts, tris, edge_ids, flip, method="cubes", level=level)
+        return verts, edge_ids, tris

@@ -1,23 +1,34 @@
-"""Validation shared by every extractor: what the kernels may assume."""
+"""Validation shared by every extractor: what the kernels may assume.
+
+:func:`prepare` is the one entry point of the built-in extractors: it checks
+the volume's shape and type, makes the samples C-ordered (Z, Y, X), and runs
+the kernels' first pass (``isoconvert._native.scan_rows``), which reads every
+sample once and gives the value range, NaN/Inf and samples equal to the level
+on the way; the level and the vertex offset are checked from those, so no
+separate sweep over the volume validates it.
+"""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import LevelError, VolumeError
+from ..methods import NO_DEGENERATE_OFFSET
 from ..volume import SUPPORTED_DTYPES, ValueRange, Volume, slabs, value_range
 
 
-def kernel_array(
+def kernel_samples(
     volume: Volume,
     ndim: int,
     method: str,
     nan_as: float | None = None,
     on_status: Callable[[str], None] | None = None,
-) -> tuple[np.ndarray, ValueRange]:
-    """Check a volume and return its samples as the kernels want them.
+) -> np.ndarray:
+    """Check a volume's shape and type and return its samples as the kernels want them.
 
     Parameters
     ----------
@@ -28,16 +39,16 @@ def kernel_array(
     method : str
         Extractor name, for messages.
     nan_as : float or None
-        Value that replaces NaN and +-Inf samples; None makes them an error.
+        Value that will replace NaN and +-Inf samples (checked here, used by
+        :func:`prepare`).
     on_status : callable or None
         Receives a line for each copy made (byte swap, non-contiguous data).
 
     Returns
     -------
-    array : (Z, Y, X) or (Y, X) C-contiguous, native byte order
-        A view of ``volume.data`` when possible (no copy).
-    ValueRange
-        Range of the (finite) samples.
+    (Z, Y, X) or (Y, X) array
+        C-contiguous, native byte order, one of the kernels' types; a view of
+        ``volume.data`` when possible (no copy).
     """
     src = volume.source
     data = volume.data
@@ -76,12 +87,24 @@ def kernel_array(
         arr = arr.astype(arr.dtype.newbyteorder("="), order="C")
     if not arr.flags.c_contiguous:
         arr = np.ascontiguousarray(arr)
+    return arr
+
+
+def kernel_array(
+    volume: Volume,
+    ndim: int,
+    method: str,
+    nan_as: float | None = None,
+    on_status: Callable[[str], None] | None = None,
+) -> tuple[np.ndarray, ValueRange]:
+    """:func:`kernel_samples` plus the value range (a separate sweep; prefer :func:`prepare`)."""
+    arr = kernel_samples(volume, ndim, method, nan_as, on_status)
     stats = value_range(arr.T)
     if stats.nonfinite:
         if nan_as is None:
             raise VolumeError(
-                f"{src}: {stats.nonfinite} samples are NaN or infinite; pass --nan-as VALUE "
-                "(nan_as=) to treat them as that value"
+                f"{volume.source}: {stats.nonfinite} samples are NaN or infinite; pass "
+                "--nan-as VALUE (nan_as=) to treat them as that value"
             )
         arr = np.where(np.isfinite(arr), arr, arr.dtype.type(nan_as))
         lo, hi = min(stats.min, nan_as), max(stats.max, nan_as)
@@ -146,6 +169,9 @@ def check_vertex_offset(offset: float) -> float:
 def count_equal(data: np.ndarray, level: float) -> int:
     """How many samples equal ``level`` exactly (slab by slab, no full-size temporary).
 
+    For extractors that do not use :func:`prepare` (plugins), whose first pass
+    counts them on the way.
+
     Parameters
     ----------
     data : (X, Y, Z) or (X, Y) array
@@ -155,21 +181,181 @@ def count_equal(data: np.ndarray, level: float) -> int:
     -------
     int
         0 at once, without a scan, when no sample of this type can equal
-        ``level`` (a level that is not a whole number for integer samples, or
-        not representable in the samples' floating-point type).
+        ``level`` (see :func:`equal_target`).
     """
-    level = float(level)
+    target = equal_target(data.dtype, float(level))
+    if target is None:
+        return 0
     if data.dtype == np.bool_:
         data = data.view(np.uint8)
-    if np.issubdtype(data.dtype, np.integer):
-        info = np.iinfo(data.dtype)
-        if not level.is_integer() or not info.min <= level <= info.max:
-            return 0
-        target = data.dtype.type(int(level))
-    elif np.issubdtype(data.dtype, np.floating):
-        if float(data.dtype.type(level)) != level:  # e.g. 0.1 against float32 samples
-            return 0
-        target = level
-    else:
-        return 0
-    return sum(int(np.count_nonzero(slab == target)) for slab in slabs(data))
+    value = data.dtype.type(target)
+    return sum(int(np.count_nonzero(slab == value)) for slab in slabs(data))
+
+
+def kernel_threads() -> int:
+    """Threads the kernels use: ``ISOCONVERT_THREADS`` when set, else the CPUs
+    this process may run on."""
+    given = os.environ.get("ISOCONVERT_THREADS", "").strip()
+    if given:
+        try:
+            return max(1, int(given))
+        except ValueError:
+            raise VolumeError(f"ISOCONVERT_THREADS must be a whole number, got {given!r}") from None
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """What a kernel may assume about its input.
+
+    Attributes
+    ----------
+    array : (Z, Y, X) or (Y, X) array
+        The samples, C-contiguous, native byte order, a supported type.
+    scan : isoconvert._native.RowScan
+        The first pass over ``array`` (viewed as (Z, Y, X); (1, Y, X) for 2D).
+    level : float
+        The isovalue, inside the data range.
+    offset : float
+        The vertex offset to use (0 <= offset < 0.5).
+    threads : int
+    """
+
+    array: np.ndarray
+    scan: object
+    level: float
+    offset: float
+    threads: int
+
+    @property
+    def volume3(self) -> np.ndarray:
+        """``array`` as (Z, Y, X): 2D images as one slice."""
+        return self.array if self.array.ndim == 3 else self.array[np.newaxis]
+
+
+def prepare(
+    volume: Volume,
+    ndim: int,
+    method: str,
+    level: float,
+    *,
+    nan_as: float | None = None,
+    vertex_offset: float | None = None,
+    on_status: Callable[[str], None] | None = None,
+) -> Prepared:
+    """Check a volume and a level for a kernel, and run the kernels' first pass.
+
+    Parameters
+    ----------
+    volume : Volume
+    ndim : int
+        Dimensions the extractor works in (2 or 3).
+    method : str
+        Extractor name, for messages.
+    level : float
+    nan_as : float or None
+        Value that replaces NaN and +-Inf samples; None makes them an error.
+    vertex_offset : float or None
+        See :func:`resolve_vertex_offset`; None chooses.
+    on_status : callable or None
+        Receives notices: copies made, and where vertices are placed.
+
+    Returns
+    -------
+    Prepared
+    """
+    from .. import _native
+
+    src = volume.source
+    level = float(level)
+    if not np.isfinite(level):
+        raise LevelError(f"{src}: the level must be a finite number, got {level}")
+    arr = kernel_samples(volume, ndim, method, nan_as, on_status)
+    threads = kernel_threads()
+    equal_to = equal_target(arr.dtype, level)
+
+    def scan(samples: np.ndarray):
+        vol3 = samples if samples.ndim == 3 else samples[np.newaxis]
+        return _native.scan_rows(vol3, level, equal_to is not None, equal_to or 0.0, threads)
+
+    rows = scan(arr)
+    if rows.nonfinite:
+        if nan_as is None:
+            raise VolumeError(
+                f"{src}: {rows.nonfinite} samples are NaN or infinite; pass --nan-as VALUE "
+                "(nan_as=) to treat them as that value"
+            )
+        arr = np.where(np.isfinite(arr), arr, arr.dtype.type(nan_as))
+        rows = scan(arr)
+    check_level(level, ValueRange(rows.min, rows.max, 0), src)
+    offset, note = resolve_vertex_offset(arr.dtype, level, vertex_offset, rows.equal)
+    if note and on_status:
+        on_status(note)
+    return Prepared(arr, rows, level, offset, threads)
+
+
+def resolve_vertex_offset(
+    dtype: np.dtype, level: float, given: float | None, equal: int
+) -> tuple[float, str | None]:
+    """The vertex offset to use, and a notice for the user (or None).
+
+    ``given`` is used as it is (after :func:`check_vertex_offset`), except None
+    (automatic): then :data:`NO_DEGENERATE_OFFSET` when some sample equals the
+    level, else 0. With the sign rule (positive when value >= level) the
+    connectivity at a level equal to sample values is that of a level a hair
+    below, so keeping vertices a thousandth of their edge away from those
+    samples changes no count (vertices and triangles stay equal to VTK's) and
+    removes every zero-length edge and collapsed triangle.
+
+    Parameters
+    ----------
+    dtype : numpy dtype
+        Of the samples (for the level suggested instead).
+    level : float
+    given : float or None
+    equal : int
+        Samples equal to ``level``.
+    """
+    if given is not None and given != 0:
+        return check_vertex_offset(given), None
+    if not equal:
+        return 0.0, None
+    samples = f"{equal:,} sample{'s' if equal > 1 else ''}"
+    if given is None:
+        return NO_DEGENERATE_OFFSET, (
+            f"level {level:g} equals {samples}: the vertices there are kept "
+            f"{NO_DEGENERATE_OFFSET:g} of an edge away from them, so the mesh has no "
+            "zero-length edges (--exact-placement puts them on the samples)"
+        )
+    return 0.0, (
+        f"level {level:g} equals {samples}: expect zero-length edges and degenerate cells "
+        f"there; use --level {_level_below(dtype, level):g}, or drop --exact-placement"
+    )
+
+
+def _level_below(dtype: np.dtype, level: float) -> float:
+    """A level just below ``level`` that no sample of this type can equal."""
+    if np.issubdtype(dtype, np.integer) or dtype == np.bool_:
+        return level - 0.5
+    return float(np.nextafter(level, -np.inf))
+
+
+def equal_target(dtype: np.dtype, level: float) -> float | None:
+    """``level`` when a sample of this type can equal it, else None (nothing to count).
+
+    A level that is not a whole number cannot equal integer samples, nor can a
+    float64 level with no float32 twin (0.1) equal float32 samples.
+    """
+    if dtype == np.bool_:
+        dtype = np.dtype(np.uint8)
+    if np.issubdtype(dtype, np.integer):
+        info = np.iinfo(dtype)
+        if level.is_integer() and info.min <= level <= info.max:
+            return level
+        return None
+    if np.issubdtype(dtype, np.floating) and float(dtype.type(level)) == level:
+        return level
+    return None

@@ -3,6 +3,12 @@
 On a 2D volume it contours the image; on a 3D volume it contours every slice
 across one axis (the slice-by-slice approach of book section 1.4), giving a
 stack of 3D polylines.
+
+The kernel is C++ (src/squares.cpp), in the manner of Flying Edges like Marching
+Cubes: the squares of a slice across any axis lie on the rows of samples along x
+of one row of cubes, so all slices are contoured in one parallel sweep over the
+rows, without a transposed copy of the volume, and only where the first pass
+over the samples found sign changes.
 """
 
 from __future__ import annotations
@@ -13,14 +19,12 @@ import numpy as np
 
 from ..errors import IsoconvertError
 from ..mesh import Mesh
+from ..methods import SQUARE_AMBIGUITY_RULES
 from ..volume import Volume
-from .jit import compile_notice
-from .placement import finish_mesh
-from .prepare import check_level, check_vertex_offset, kernel_array
-from .tables import AMBIGUITY_RULES, DEFAULT_AMBIGUITY, marching_squares_table
+from .placement import mesh_info, reversed_orientation
+from .prepare import prepare
+from .tables import DEFAULT_AMBIGUITY, marching_squares_table
 
-#: Ambiguity rules for squares: the two fixed ones and the asymptotic decider.
-SQUARE_AMBIGUITY_RULES = (*AMBIGUITY_RULES, "asymptotic")
 _AXES = {"x": 0, "y": 1, "z": 2}
 
 
@@ -31,7 +35,7 @@ def marching_squares(
     flip: bool = False,
     ambiguity: str = DEFAULT_AMBIGUITY,
     nan_as: float | None = None,
-    vertex_offset: float = 0.0,
+    vertex_offset: float | None = None,
     axis: str = "z",
     on_status: Callable[[str], None] | None = None,
 ) -> Mesh:
@@ -50,10 +54,11 @@ def marching_squares(
         "separate-negative", or "asymptotic" (the bilinear saddle decides).
     nan_as : float or None
         Treat NaN/Inf samples as this value; None makes them an error.
-    vertex_offset : float
+    vertex_offset : float or None
         Keep every vertex at least this fraction of its edge's length away from
-        the edge's ends (0 <= f < 0.5). With f > 0, a level equal to grid values
-        gives no zero-length edges (see :func:`check_vertex_offset`).
+        the edge's ends (0 <= f < 0.5); None chooses (see
+        :func:`~isoconvert.extract.prepare.resolve_vertex_offset`). With f > 0, a
+        level equal to grid values gives no zero-length edges.
     axis : str
         For 3D volumes: "x", "y" or "z", the axis the slices are across.
     on_status : callable or None
@@ -62,10 +67,21 @@ def marching_squares(
     Returns
     -------
     Mesh
-        ``vertices (V, 3) float64`` (z = 0 for 2D input), ``cells (C, 2) int64``
-        segments with the positive side on their left when seen from the
-        positive end of the slice axis, ``edge_ids (V,) int64``.
+        ``vertices (V, 3) float64`` in world units (z = 0 for 2D input),
+        ``cells (C, 2) int64`` segments with the positive side on their left
+        when seen from the positive end of the slice axis, ``edge_ids (V,)
+        int64``: ``3 * (i + X * (j + Y * k)) + axis`` of the grid edge from
+        vertex (i, j, k) along axis x (0), y (1) or z (2) on volumes,
+        ``2 * (i + X * j) + axis`` on images. Each slice is contoured in the
+        plane of the two axes that follow ``axis`` cyclically ((x, y) across z,
+        (z, x) across y, (y, z) across x). Vertices come row of samples by row
+        (``j + Y * k``), within a row by edge axis, then by increasing x;
+        segments by the lowest row of their square in the same order, by
+        increasing x: the order follows from the grid alone, whatever the
+        number of threads.
     """
+    from .. import _native
+
     if ambiguity not in SQUARE_AMBIGUITY_RULES:
         raise IsoconvertError(
             f"unknown ambiguity rule {ambiguity!r} for squares; "
@@ -73,69 +89,63 @@ def marching_squares(
         )
     if axis not in _AXES:
         raise IsoconvertError(f"--axis must be x, y or z, got {axis!r}")
-    rule = SQUARE_AMBIGUITY_RULES.index(ambiguity)
-    ndim = volume.ndim
-    arr, stats = kernel_array(volume, ndim, "squares", nan_as=nan_as, on_status=on_status)
-    level = check_level(level, stats, volume.source)
-    offset = check_vertex_offset(vertex_offset)
-    counts, table_pos = marching_squares_table("separate-positive")
-    table = np.stack([table_pos, marching_squares_table("separate-negative")[1]])
-    notice = f"compiling the Marching Squares kernel for {arr.dtype} data (first run only)"
-    with compile_notice(on_status, notice):
-        from .kernels.squares import count_squares, fill_squares
+    planar = volume.ndim == 2
+    prep = prepare(
+        volume,
+        volume.ndim,
+        "squares",
+        level,
+        nan_as=nan_as,
+        vertex_offset=vertex_offset,
+        on_status=on_status,
+    )
+    a = 2 if planar else _AXES[axis]
+    f = prep.volume3
+    counts, segments = _square_tables()
+    n = _native.count_squares(f, prep.scan, a, counts, segments, prep.threads)
+    if n.segments == 0:
+        raise IsoconvertError(f"{volume.source}: no slice crosses level {prep.level:g}")
+    affine, origin = _placement3(volume)
+    verts = np.empty((n.vertices, 3), dtype=np.float64)
+    edge_ids = np.empty(n.vertices, dtype=np.int64)
+    segs = np.empty((n.segments, 2), dtype=np.int64)
+    _native.fill_squares(
+        f,
+        prep.scan,
+        n,
+        a,
+        counts,
+        segments,
+        SQUARE_AMBIGUITY_RULES.index(ambiguity),  # as SquareRule in src/squares.hpp
+        planar,
+        affine,
+        origin,
+        np.zeros(3, dtype=np.int64),
+        np.array([f.shape[2], f.shape[1]], dtype=np.int64),
+        prep.offset,
+        reversed_orientation(volume, flip),
+        prep.threads,
+        verts,
+        edge_ids,
+        segs,
+    )
+    return Mesh(verts, segs, edge_ids, mesh_info(volume, "squares", prep.level, flip, prep.offset))
 
-        def contour(image):
-            n_vert, n_seg = count_squares(image, level, counts)
-            verts = np.empty((n_vert, 2), dtype=np.float64)
-            ids = np.empty(n_vert, dtype=np.int64)
-            segs = np.empty((n_seg, 2), dtype=np.int64)
-            xmap = np.empty(image.shape, dtype=np.int64)
-            ymap = np.empty(image.shape, dtype=np.int64)
-            fill_squares(image, level, offset, rule, counts, table, verts, ids, segs, xmap, ymap)
-            return verts, ids, segs
 
-        if ndim == 2:
-            verts, ids, segs = contour(arr)
-            mesh = finish_mesh(volume, verts, segs, ids, flip, method="squares", level=level)
-            mesh.vertices = np.column_stack([mesh.vertices, np.zeros(len(verts))])
-            return mesh
-        return _slices(volume, arr, level, _AXES[axis], contour, flip)
+def _square_tables() -> tuple[np.ndarray, np.ndarray]:
+    """The table of both fixed rules: counts ``(16,)``, segments ``(2, 16, 2, 2)``
+    (rule 0 separate-positive, 1 separate-negative; the counts agree)."""
+    counts, positive = marching_squares_table("separate-positive")
+    negative = marching_squares_table("separate-negative")[1]
+    return counts, np.ascontiguousarray(np.stack([positive, negative]))
 
 
-def _slices(volume, arr, level, a, contour, flip) -> Mesh:
-    """Contour each slice across axis ``a``; in-plane axes ``(b, c)`` follow it
-    cyclically, so (b, c, a) is right-handed and "left" is seen from +a."""
-    b, c = (a + 1) % 3, (a + 2) % 3
-    dims = volume.shape
-    data = arr.T  # (X, Y, Z) view of the validated samples
-    all_verts, all_ids, all_segs = [], [], []
-    base = 0
-    for s in range(dims[a]):
-        index = [slice(None)] * 3
-        index[a] = s
-        plane = data[tuple(index)]  # remaining axes in increasing order
-        if b > c:  # (x, z) for a = y: make it (z, x)
-            plane = plane.T
-        image = np.ascontiguousarray(plane.T)  # rows along c, columns along b
-        verts2, ids2, segs = contour(image)
-        if len(segs) == 0:
-            continue
-        verts = np.empty((len(verts2), 3), dtype=np.float64)
-        verts[:, b] = verts2[:, 0]
-        verts[:, c] = verts2[:, 1]
-        verts[:, a] = s
-        axis2, lin = ids2 % 2, ids2 // 2
-        u, v = lin % dims[b], lin // dims[b]
-        grid = np.empty((len(ids2), 3), dtype=np.int64)
-        grid[:, b], grid[:, c], grid[:, a] = u, v, s
-        axis3 = np.where(axis2 == 0, b, c)
-        all_ids.append(3 * (grid[:, 0] + dims[0] * (grid[:, 1] + dims[1] * grid[:, 2])) + axis3)
-        all_verts.append(verts)
-        all_segs.append(segs + base)
-        base += len(verts)
-    if not all_segs:
-        raise IsoconvertError(f"{volume.source}: no slice crosses level {level:g}")
-    verts = np.concatenate(all_verts)
-    segs = np.concatenate(all_segs)
-    ids = np.concatenate(all_ids)
-    return finish_mesh(volume, verts, segs, ids, flip, method="squares", level=level)
+def _placement3(volume: Volume) -> tuple[np.ndarray, np.ndarray]:
+    """The index-to-world map as a ``(3, 3)`` matrix and ``(3,)`` origin; a 2D
+    image's plane is z = 0."""
+    affine = np.zeros((3, 3), dtype=np.float64)
+    origin = np.zeros(3, dtype=np.float64)
+    nd = volume.ndim
+    affine[:nd, :nd] = volume.affine
+    origin[:nd] = volume.origin
+    return affine, origin

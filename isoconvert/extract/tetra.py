@@ -1,4 +1,10 @@
-"""Marching Tetrahedra: each cube split into six tetrahedra (Kuhn triangulation)."""
+"""Marching Tetrahedra: each cube split into six tetrahedra (Kuhn triangulation).
+
+The kernel is C++ (src/tetra.cpp), in the manner of Flying Edges like Marching
+Cubes: every edge of the decomposition joins two corners of one cube, so the
+stretch of each row of cubes where the surface can be, found by the first pass
+over the samples, bounds the work of the counting and filling passes.
+"""
 
 from __future__ import annotations
 
@@ -9,9 +15,8 @@ import numpy as np
 from ..errors import IsoconvertError
 from ..mesh import Mesh
 from ..volume import Volume
-from .jit import compile_notice
-from .placement import finish_mesh
-from .prepare import check_level, check_vertex_offset, kernel_array
+from .placement import mesh_info, reversed_orientation
+from .prepare import prepare
 from .tables import (
     CUBE_TETRAHEDRA,
     DEFAULT_AMBIGUITY,
@@ -21,9 +26,6 @@ from .tables import (
     marching_tetrahedra_table,
 )
 
-_IN_LAYER = np.flatnonzero(TETRA_DIRECTIONS[:, 2] == 0).astype(np.int64)
-_CROSSING = np.flatnonzero(TETRA_DIRECTIONS[:, 2] == 1).astype(np.int64)
-
 
 def marching_tetrahedra(
     volume: Volume,
@@ -32,45 +34,57 @@ def marching_tetrahedra(
     flip: bool = False,
     ambiguity: str = DEFAULT_AMBIGUITY,
     nan_as: float | None = None,
-    vertex_offset: float = 0.0,
+    vertex_offset: float | None = None,
     on_status: Callable[[str], None] | None = None,
 ) -> Mesh:
     """Extract the isosurface of a 3D volume with Marching Tetrahedra.
 
     Tetrahedra have no ambiguous configurations, so ``ambiguity`` must be left
-    at its default. Vertices lie on cube edges, face diagonals and cube
-    diagonals; ``edge_ids`` are ``7 * (i + X * (j + Y * k)) + direction`` with
-    directions x, y, z, xy, xz, yz, xyz. Other parameters and the result are as
-    for :func:`~isoconvert.extract.cubes.marching_cubes`.
+    at its default. Other parameters are as for
+    :func:`~isoconvert.extract.cubes.marching_cubes`.
+
+    Returns
+    -------
+    Mesh
+        ``vertices (V, 3) float64`` in world units, ``cells (C, 3) int64``
+        (normals from the positive to the negative side), ``edge_ids (V,)
+        int64``: vertices lie on cube edges, face diagonals and cube diagonals,
+        with ids ``7 * (i + X * (j + Y * k)) + direction`` for directions x, y,
+        z, xy, xz, yz, xyz (:data:`~isoconvert.extract.tables.TETRA_DIRECTIONS`)
+        from grid vertex (i, j, k). Vertices come row of samples by row
+        (``j + Y * k``), within a row by direction, then by increasing x;
+        triangles cube row by cube row, by increasing x, then tetrahedron by
+        tetrahedron: the order follows from the grid alone, whatever the
+        number of threads.
     """
+    from .. import _native
+
     if ambiguity != DEFAULT_AMBIGUITY:
         raise IsoconvertError("tetra has no ambiguous configurations; drop --ambiguity")
-    arr, stats = kernel_array(volume, 3, "tetra", nan_as=nan_as, on_status=on_status)
-    level = check_level(level, stats, volume.source)
-    offset = check_vertex_offset(vertex_offset)
-    counts, table = marching_tetrahedra_table()
-    notice = f"compiling the Marching Tetrahedra kernel for {arr.dtype} data (first run only)"
-    with compile_notice(on_status, notice):
-        from .kernels.tetra import count_tetra, fill_tetra
-
-        n_vert, n_tri = count_tetra(arr, level, TETRA_DIRECTIONS, CUBE_TETRAHEDRA, counts)
-        verts = np.empty((n_vert, 3), dtype=np.float64)
-        edge_ids = np.empty(n_vert, dtype=np.int64)
-        tris = np.empty((n_tri, 3), dtype=np.int64)
-        fill_tetra(
-            arr,
-            level,
-            offset,
-            TETRA_DIRECTIONS,
-            _IN_LAYER,
-            _CROSSING,
-            CUBE_TETRAHEDRA,
-            counts,
-            table,
-            TETRA_EDGE_BASE,
-            TETRA_EDGE_DIR,
-            verts,
-            edge_ids,
-            tris,
-        )
-    return finish_mesh(volume, verts, tris, edge_ids, flip, method="tetra", level=level)
+    prep = prepare(
+        volume, 3, "tetra", level, nan_as=nan_as, vertex_offset=vertex_offset, on_status=on_status
+    )
+    counts, triangles = marching_tetrahedra_table()
+    tables = (TETRA_DIRECTIONS, CUBE_TETRAHEDRA, counts, triangles, TETRA_EDGE_BASE, TETRA_EDGE_DIR)
+    f = prep.array
+    n = _native.count_tetra(f, prep.scan, *tables, prep.threads)
+    verts = np.empty((n.vertices, 3), dtype=np.float64)
+    edge_ids = np.empty(n.vertices, dtype=np.int64)
+    tris = np.empty((n.triangles, 3), dtype=np.int64)
+    _native.fill_tetra(
+        f,
+        prep.scan,
+        n,
+        *tables,
+        np.ascontiguousarray(volume.affine, dtype=np.float64),
+        np.ascontiguousarray(volume.origin, dtype=np.float64),
+        np.zeros(3, dtype=np.int64),
+        np.array([f.shape[2], f.shape[1]], dtype=np.int64),
+        prep.offset,
+        reversed_orientation(volume, flip),
+        prep.threads,
+        verts,
+        edge_ids,
+        tris,
+    )
+    return Mesh(verts, tris, edge_ids, mesh_info(volume, "tetra", prep.level, flip, prep.offset))

@@ -1,0 +1,246 @@
+// Marching Cubes in the manner of Flying Edges (see rows.hpp).
+//
+// Vertex order: row by row (r = j + NY * k), and within a row its bipolar
+// x-edges, then its y-edges, then its z-edges, each by increasing x. Triangles:
+// cube row by cube row in the same order, by increasing x within a row, in
+// table order within a cube. Both orders follow from the grid alone, so they do
+// not depend on the number of threads, and a z-slab of a volume numbers its
+// rows in the same order as the whole volume.
+#include "cubes.hpp"
+
+#include "scan.hpp"
+
+namespace iso {
+
+namespace {
+
+// Per row starts of its x-, y- and z-vertices and of its cubes' triangles.
+struct Starts {
+  std::vector<i64> vertex, triangle;
+};
+
+// The bit masks of one word (64 positions) of a cube row: which positions
+// start a bipolar edge, and which cubes have corners of both signs.
+struct Word {
+  std::uint64_t b[4];  // signs of the four rows at positions 64 w + q
+  std::uint64_t n[4];  // ... at positions 64 w + q + 1
+  std::uint64_t x[4];  // bipolar x-edges of each row
+  std::uint64_t y[2];  // bipolar y-edges of rows 0 and 2
+  std::uint64_t z[2];  // bipolar z-edges of rows 0 and 1
+  std::uint64_t cubes; // cubes with corners of both signs
+
+  Word(const RowScan &s, const std::uint64_t *const (&rows)[4], i64 w) {
+    const std::uint64_t samples = below(s.nx, w), edges = below(s.nx - 1, w);
+    for (int r = 0; r < 4; ++r) {
+      b[r] = rows[r][w];
+      n[r] = next_bits(rows[r], s.words, w);
+      x[r] = (b[r] ^ n[r]) & edges;
+    }
+    y[0] = (b[0] ^ b[1]) & samples;
+    y[1] = (b[2] ^ b[3]) & samples;
+    z[0] = (b[0] ^ b[2]) & samples;
+    z[1] = (b[1] ^ b[3]) & samples;
+    // a cube is all one sign when none of its x-edges is bipolar and its four
+    // rows agree at its lower x
+    cubes = (x[0] | x[1] | x[2] | x[3] | y[0] | z[0] | (b[0] ^ b[3])) & edges;
+  }
+
+  // The configuration of the cube at bit q (cube vertex v = x + 2y + 4z).
+  unsigned config(int q) const {
+    unsigned c = 0;
+    for (int r = 0; r < 4; ++r) {
+      c |= unsigned((b[r] >> q) & 1) << (2 * r);
+      c |= unsigned((n[r] >> q) & 1) << (2 * r + 1);
+    }
+    return c;
+  }
+};
+
+// The set bits of m below bit q.
+inline int before(std::uint64_t m, int q) { return popcount(m & ((std::uint64_t(1) << q) - 1)); }
+
+struct Walk {
+  const RowScan &s;
+  const CubeTable &table;
+
+  // The four rows of cube row (j, k): (j, k), (j+1, k), (j, k+1), (j+1, k+1).
+  // On the last y or z row a missing neighbour is replaced by the row itself,
+  // so its edges towards it are never bipolar and it makes no cubes.
+  void rows_of(i64 j, i64 k, i64 (&r)[4], const std::uint64_t *(&bits)[4], bool &cubes) const {
+    const bool has_y = j + 1 < s.ny, has_z = k + 1 < s.nz;
+    r[0] = j + s.ny * k;
+    r[1] = has_y ? r[0] + 1 : r[0];
+    r[2] = has_z ? r[0] + s.ny : r[0];
+    r[3] = has_z ? r[1] + s.ny : r[1];
+    for (int b = 0; b < 4; ++b) bits[b] = s.row_bits(r[b]);
+    cubes = has_y && has_z;
+  }
+
+  // Counting pass for row (j, k).
+  void count(i64 j, i64 k, i32 &cy, i32 &cz, i32 &ct) const {
+    i64 r[4];
+    const std::uint64_t *bits[4];
+    bool cubes;
+    rows_of(j, k, r, bits, cubes);
+    cy = cz = ct = 0;
+    i64 lo, hi;
+    if (!trim(s, r, lo, hi)) return;
+    for (i64 w = lo >> 6; w <= hi >> 6; ++w) {
+      const Word m(s, bits, w);
+      cy += popcount(m.y[0]);
+      cz += popcount(m.z[0]);
+      if (!cubes) continue;
+      for (std::uint64_t c = m.cubes; c; c &= c - 1) ct += table.count[m.config(ctz(c))];
+    }
+  }
+
+  // Filling pass for row (j, k): its vertices, and its cubes' triangles.
+  template <class T>
+  void fill(const T *f, i64 j, i64 k, const CubesCount &n, const Starts &at, const Placement &w,
+            double *verts, i64 *ids, i64 *tris) const {
+    i64 r[4];
+    const std::uint64_t *bits[4];
+    bool cubes;
+    rows_of(j, k, r, bits, cubes);
+    i64 lo, hi;
+    if (!trim(s, r, lo, hi)) return;
+    const T *p0 = f + r[0] * s.nx, *p1 = f + r[1] * s.nx, *p2 = f + r[2] * s.nx;
+    // The next slice's row (p2) was last read by the first pass, long ago: ask
+    // for all its lines at once, so their loads overlap instead of stalling one
+    // bipolar edge at a time (this halved the pass on a dense surface).
+    for (i64 i = lo; i <= hi; i += 64 / sizeof(T)) {
+      __builtin_prefetch(p2 + i);
+      __builtin_prefetch(p1 + i);
+    }
+    // starts of the x-vertices of the four rows, of the y-vertices of rows 0
+    // and 2, of the z-vertices of rows 0 and 1
+    i64 xs[4], ys[2], zs[2];
+    for (int b = 0; b < 4; ++b) xs[b] = at.vertex[r[b]];
+    ys[0] = xs[0] + s.cx[r[0]];
+    ys[1] = xs[2] + s.cx[r[2]];
+    zs[0] = ys[0] + n.cy[r[0]];
+    zs[1] = xs[1] + s.cx[r[1]] + n.cy[r[1]];
+    i64 vx = xs[0], vy = ys[0], vz = zs[0], t = at.triangle[r[0]];
+    // grid position of row 0 in the whole grid, for positions and ids
+    const i64 gj = j + w.index_origin[1], gk = k + w.index_origin[2];
+    const i64 id_row = w.id_dims[0] * (gj + w.id_dims[1] * gk);
+    const double y = static_cast<double>(gj), z = static_cast<double>(gk);
+    const double level = s.level;
+    auto put = [&](i64 v, double px, double py, double pz, i64 id) {
+      w.world(px, py, pz, verts + 3 * v);
+      ids[v] = id;
+    };
+
+    for (i64 word = lo >> 6; word <= hi >> 6; ++word) {
+      const Word m(s, bits, word);
+      const i64 base = 64 * word;
+      // row 0's vertices, in the order x-edges, y-edges, z-edges: each kind
+      // has its own run of numbers, so they can be written word by word
+      for (std::uint64_t e = m.x[0]; e; e &= e - 1) {
+        const i64 i = base + ctz(e), gi = i + w.index_origin[0];
+        const double d = edge_fraction(double(p0[i]), double(p0[i + 1]), level, w.offset);
+        put(vx++, double(gi) + d, y, z, 3 * (gi + id_row));
+      }
+      for (std::uint64_t e = m.y[0]; e; e &= e - 1) {
+        const i64 i = base + ctz(e), gi = i + w.index_origin[0];
+        const double d = edge_fraction(double(p0[i]), double(p1[i]), level, w.offset);
+        put(vy++, double(gi), y + d, z, 3 * (gi + id_row) + 1);
+      }
+      for (std::uint64_t e = m.z[0]; e; e &= e - 1) {
+        const i64 i = base + ctz(e), gi = i + w.index_origin[0];
+        const double d = edge_fraction(double(p0[i]), double(p2[i]), level, w.offset);
+        put(vz++, double(gi), y, z + d, 3 * (gi + id_row) + 2);
+      }
+      if (cubes) {
+        for (std::uint64_t c = m.cubes; c; c &= c - 1) {
+          const int q = ctz(c);
+          const unsigned config = m.config(q);
+          const int nt = table.count[config];
+          if (!nt) continue;
+          // vertex numbers of the cube's 12 edges (tables.py numbering)
+          i64 e[12];
+          for (int b = 0; b < 4; ++b) e[b] = xs[b] + before(m.x[b], q);
+          e[4] = ys[0] + before(m.y[0], q);
+          e[5] = e[4] + ((m.y[0] >> q) & 1);
+          e[6] = ys[1] + before(m.y[1], q);
+          e[7] = e[6] + ((m.y[1] >> q) & 1);
+          e[8] = zs[0] + before(m.z[0], q);
+          e[9] = e[8] + ((m.z[0] >> q) & 1);
+          e[10] = zs[1] + before(m.z[1], q);
+          e[11] = e[10] + ((m.z[1] >> q) & 1);
+          const std::int8_t *tri = table.edges[config];
+          for (int u = 0; u < nt; ++u, ++t) {
+            i64 *out = tris + 3 * t;
+            const i64 a = e[tri[3 * u]], b = e[tri[3 * u + 1]], d = e[tri[3 * u + 2]];
+            out[0] = w.reverse ? d : a;
+            out[1] = b;
+            out[2] = w.reverse ? a : d;
+          }
+        }
+      }
+      for (int b = 0; b < 4; ++b) xs[b] += popcount(m.x[b]);
+      for (int b = 0; b < 2; ++b) {
+        ys[b] += popcount(m.y[b]);
+        zs[b] += popcount(m.z[b]);
+      }
+    }
+  }
+};
+
+void starts(const RowScan &s, const CubesCount &n, Starts &at) {
+  const i64 rows = s.rows();
+  at.vertex.resize(rows + 1);
+  at.triangle.resize(rows + 1);
+  i64 v = 0, t = 0;
+  for (i64 r = 0; r < rows; ++r) {
+    at.vertex[r] = v;
+    at.triangle[r] = t;
+    v += s.cx[r] + n.cy[r] + n.cz[r];
+    t += n.ct[r];
+  }
+  at.vertex[rows] = v;
+  at.triangle[rows] = t;
+}
+
+}  // namespace
+
+template <class T>
+void count_cubes(const T *f, const RowScan &s, const CubeTable &table, int threads,
+                 CubesCount &out) {
+  const i64 rows = s.rows();
+  out.cy.assign(rows, 0);
+  out.cz.assign(rows, 0);
+  out.ct.assign(rows, 0);
+  const Walk walk{s, table};
+  for_each_row(s, threads,
+               [&](i64 j, i64 k, i64 r) { walk.count(j, k, out.cy[r], out.cz[r], out.ct[r]); });
+  i64 v = 0, t = 0;
+  for (i64 r = 0; r < rows; ++r) {
+    v += s.cx[r] + out.cy[r] + out.cz[r];
+    t += out.ct[r];
+  }
+  out.vertices = v;
+  out.triangles = t;
+}
+
+template <class T>
+void fill_cubes(const T *f, const RowScan &s, const CubeTable &table, const CubesCount &counts,
+                const Placement &where, int threads, double *verts, i64 *ids, i64 *tris) {
+  Starts at;
+  starts(s, counts, at);
+  const Walk walk{s, table};
+  for_each_row(s, threads, [&](i64 j, i64 k, i64) {
+    walk.fill(f, j, k, counts, at, where, verts, ids, tris);
+  });
+}
+
+#define ISO_CUBES(T)                                                                       \
+  template void count_cubes<T>(const T *, const RowScan &, const CubeTable &, int,         \
+                               CubesCount &);                                              \
+  template void fill_cubes<T>(const T *, const RowScan &, const CubeTable &,               \
+                              const CubesCount &, const Placement &, int, double *, i64 *, \
+                              i64 *);
+ISO_FOR_EACH_SAMPLE_TYPE(ISO_CUBES)
+#undef ISO_CUBES
+
+}  // namespace iso
