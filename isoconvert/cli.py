@@ -845,6 +845,16 @@ def _text_histogram(hist, rows: int = 12, width: int = 40) -> list[str]:
     ]
 
 
+@app.command(cls=_Command, hidden=True)
+def warmup() -> None:
+    """Kept so scripts written for isoconvert 0.1 still run: there is nothing to warm up."""
+    print(
+        "isoconvert warmup has nothing to do: the kernels are compiled when isoconvert is "
+        "installed (you can drop this command)",
+        file=sys.stderr,
+    )
+
+
 @app.command(cls=_Command)
 def formats() -> None:
     """List input formats, output formats and extraction methods."""

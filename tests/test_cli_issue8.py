@@ -303,3 +303,11 @@ def test_data_outside_the_header_folder_needs_the_flag_everywhere(tmp_path, caps
     assert "outside the header's folder" in err + stdout
     code, stdout, err = run(capsys, *args, "--allow-outside-data")
     assert code == 0, err
+
+
+def test_the_old_warmup_command_says_it_has_nothing_to_do(capsys):
+    """CI scripts written when numba compiled on first use keep running."""
+    assert main(["warmup"]) == 0
+    assert "nothing to do" in capsys.readouterr().err
+    assert main(["--help"]) == 0
+    assert "warmup" not in capsys.readouterr().out

@@ -124,16 +124,34 @@ def test_output_is_bit_identical_for_any_thread_count(monkeypatch):
     for threads in ("1", "2", "3", "8"):
         monkeypatch.setenv("ISOCONVERT_THREADS", threads)
         meshes.append(extract(vol, 0.1))
+    # more threads than this machine has CPUs, straight through the kernel
+    from isoconvert import _native
+    from isoconvert.extract.cubes import CubesBlock
+
+    zyx = np.ascontiguousarray(vol.data.T)
+    scan = _native.scan_rows(zyx, 0.1, False, 0.0, 7)
+    v, i, t = CubesBlock(vol.affine, vol.origin, vol.shape, threads=7).extract(zyx, scan)
+    meshes.append(type(meshes[0])(v, t, i))
     for m in meshes[1:]:
         assert m.vertices.tobytes() == meshes[0].vertices.tobytes()
         assert m.cells.tobytes() == meshes[0].cells.tobytes()
         assert m.edge_ids.tobytes() == meshes[0].edge_ids.tobytes()
 
 
-def test_bad_thread_count_is_a_clear_error(monkeypatch):
-    monkeypatch.setenv("ISOCONVERT_THREADS", "two")
-    with pytest.raises(IsoconvertError, match="ISOCONVERT_THREADS"):
+@pytest.mark.parametrize("value", ["two", "2.5", "0", "-1"])
+def test_bad_thread_count_is_a_clear_error(monkeypatch, value):
+    monkeypatch.setenv("ISOCONVERT_THREADS", value)
+    with pytest.raises(IsoconvertError, match="ISOCONVERT_THREADS must be a whole number"):
         extract(Volume(np.random.default_rng(0).random((4, 4, 4))), 0.5)
+
+
+def test_more_threads_than_cpus_are_capped(monkeypatch):
+    from isoconvert.threads import available_cpus, kernel_threads
+
+    monkeypatch.setenv("ISOCONVERT_THREADS", "1000")
+    assert kernel_threads() == available_cpus()
+    monkeypatch.setenv("ISOCONVERT_THREADS", "1")
+    assert kernel_threads() == 1
 
 
 @pytest.mark.parametrize("dtype", ["float32", "float64"])

@@ -10,7 +10,6 @@ separate sweep over the volume validates it.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -18,6 +17,7 @@ import numpy as np
 
 from ..errors import LevelError, VolumeError
 from ..methods import NO_DEGENERATE_OFFSET
+from ..threads import kernel_threads
 from ..volume import SUPPORTED_DTYPES, ValueRange, Volume, slabs, value_range
 
 
@@ -190,21 +190,6 @@ def count_equal(data: np.ndarray, level: float) -> int:
         data = data.view(np.uint8)
     value = data.dtype.type(target)
     return sum(int(np.count_nonzero(slab == value)) for slab in slabs(data))
-
-
-def kernel_threads() -> int:
-    """Threads the kernels use: ``ISOCONVERT_THREADS`` when set, else the CPUs
-    this process may run on."""
-    given = os.environ.get("ISOCONVERT_THREADS", "").strip()
-    if given:
-        try:
-            return max(1, int(given))
-        except ValueError:
-            raise VolumeError(f"ISOCONVERT_THREADS must be a whole number, got {given!r}") from None
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 @dataclass(frozen=True)

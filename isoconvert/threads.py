@@ -1,0 +1,40 @@
+"""How many threads the compiled kernels use (extraction and the mesh report)."""
+
+from __future__ import annotations
+
+import os
+
+from .errors import IsoconvertError
+
+
+def available_cpus() -> int:
+    """The CPUs this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def kernel_threads() -> int:
+    """``ISOCONVERT_THREADS`` when set (at most the CPUs available: more only adds
+    start-up and switching costs), else the CPUs this process may run on.
+
+    Raises
+    ------
+    IsoconvertError
+        When ``ISOCONVERT_THREADS`` is not a whole number of at least 1.
+    """
+    cpus = available_cpus()
+    given = os.environ.get("ISOCONVERT_THREADS", "").strip()
+    if not given:
+        return cpus
+    try:
+        threads = int(given)
+    except ValueError:
+        threads = 0
+    if threads < 1:
+        raise IsoconvertError(
+            f"ISOCONVERT_THREADS must be a whole number of at least 1, got {given!r}; "
+            "unset it to use every CPU"
+        )
+    return min(threads, cpus)
