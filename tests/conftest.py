@@ -77,3 +77,23 @@ def directed_edges_consistent(cells: np.ndarray) -> bool:
 def euler_characteristic(vertices_used: int, cells: np.ndarray) -> int:
     edges, _ = edge_use(cells)
     return vertices_used - len(edges) + len(cells)
+
+
+def vtk_flying_edges(zyx: np.ndarray, level: float):
+    """Points (N, 3) in index units and triangles (C, 3) of VTK's vtkFlyingEdges3D."""
+    vtk = pytest.importorskip("vtk")
+    from vtk.util import numpy_support
+
+    image = vtk.vtkImageData()
+    image.SetDimensions(*zyx.shape[::-1])
+    image.GetPointData().SetScalars(numpy_support.numpy_to_vtk(zyx.ravel(), deep=True))
+    fe = vtk.vtkFlyingEdges3D()
+    fe.SetInputData(image)
+    fe.SetValue(0, level)
+    fe.ComputeNormalsOff()
+    fe.ComputeGradientsOff()
+    fe.Update()
+    out = fe.GetOutput()
+    points = numpy_support.vtk_to_numpy(out.GetPoints().GetData()).astype(np.float64)
+    cells = numpy_support.vtk_to_numpy(out.GetPolys().GetConnectivityArray()).reshape(-1, 3)
+    return points, cells

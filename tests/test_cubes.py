@@ -13,6 +13,7 @@ from conftest import (
     edge_use,
     euler_characteristic,
     load_samples_module,
+    vtk_flying_edges,
 )
 
 import isoconvert
@@ -132,25 +133,6 @@ SCANS = [
     ("marschner_lobb_41x41x41_uint8.raw", "uint8", 100.5),
     ("hydrogen_vtk_64x64x64_float32.raw", "float32", 0.1001),
 ]
-
-
-def vtk_flying_edges(zyx: np.ndarray, level: float):
-    vtk = pytest.importorskip("vtk")
-    from vtk.util import numpy_support
-
-    image = vtk.vtkImageData()
-    image.SetDimensions(*zyx.shape[::-1])
-    image.GetPointData().SetScalars(numpy_support.numpy_to_vtk(zyx.ravel(), deep=True))
-    fe = vtk.vtkFlyingEdges3D()
-    fe.SetInputData(image)
-    fe.SetValue(0, level)
-    fe.ComputeNormalsOff()
-    fe.ComputeGradientsOff()
-    fe.Update()
-    out = fe.GetOutput()
-    points = numpy_support.vtk_to_numpy(out.GetPoints().GetData()).astype(np.float64)
-    cells = numpy_support.vtk_to_numpy(out.GetPolys().GetConnectivityArray()).reshape(-1, 3)
-    return points, cells
 
 
 @pytest.mark.parametrize(("name", "dtype", "level"), SCANS)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import DATASETS, edge_key
+from conftest import DATASETS, edge_key, vtk_flying_edges
 
 import isoconvert
 from isoconvert import Volume, extract
@@ -116,9 +116,10 @@ def test_vertex_and_triangle_order_follow_the_grid():
 
 def test_output_is_bit_identical_for_any_thread_count(monkeypatch):
     x = np.linspace(0, 4 * np.pi, 90)
-    g = np.sin(x)[:, None, None] * np.cos(x)[None, :, None] + np.sin(x)[None, :, None] * np.cos(
-        x
-    )[None, None, :]
+    g = (
+        np.sin(x)[:, None, None] * np.cos(x)[None, :, None]
+        + np.sin(x)[None, :, None] * np.cos(x)[None, None, :]
+    )
     vol = Volume(g.astype(np.float32)[:, :, :77])
     meshes = []
     for threads in ("1", "2", "3", "8"):
@@ -211,9 +212,6 @@ def real_scans():
 
 @pytest.mark.parametrize("name", real_scans())
 def test_every_real_scan_matches_vtk_flying_edges(name):
-    vtk = pytest.importorskip("vtk")
-    from vtk.util import numpy_support
-
     from isoconvert.stats import histogram, otsu_level
 
     path = DATASETS / name
@@ -233,19 +231,9 @@ def test_every_real_scan_matches_vtk_flying_edges(name):
         above = zyx[zyx > level]
         level = (level + float(above.min())) / 2 if above.size else level
     mesh = extract(vol, level)
-    image = vtk.vtkImageData()
-    image.SetDimensions(*zyx.shape[::-1])
-    image.GetPointData().SetScalars(numpy_support.numpy_to_vtk(zyx.ravel(), deep=True))
-    fe = vtk.vtkFlyingEdges3D()
-    fe.SetInputData(image)
-    fe.SetValue(0, level)
-    fe.ComputeNormalsOff()
-    fe.ComputeGradientsOff()
-    fe.Update()
-    out = fe.GetOutput()
-    assert (mesh.n_vertices, mesh.n_cells) == (out.GetNumberOfPoints(), out.GetNumberOfCells())
+    points, cells = vtk_flying_edges(zyx, level)
+    assert (mesh.n_vertices, mesh.n_cells) == (len(points), len(cells))
     if mesh.n_vertices:
-        points = numpy_support.vtk_to_numpy(out.GetPoints().GetData()).astype(np.float64)
         ours = mesh.vertices - vol.origin
         ours = np.linalg.solve(vol.affine, ours.T).T  # back to index units
         ours_k, _ = edge_key(ours)

@@ -101,17 +101,22 @@ def kernel_array(
     arr = kernel_samples(volume, ndim, method, nan_as, on_status)
     stats = value_range(arr.T)
     if stats.nonfinite:
-        if nan_as is None:
-            raise VolumeError(
-                f"{volume.source}: {stats.nonfinite} samples are NaN or infinite; pass "
-                "--nan-as VALUE (nan_as=) to treat them as that value"
-            )
-        arr = np.where(np.isfinite(arr), arr, arr.dtype.type(nan_as))
+        arr = _replace_nonfinite(arr, stats.nonfinite, nan_as, volume.source)
         lo, hi = min(stats.min, nan_as), max(stats.max, nan_as)
         if stats.nonfinite == arr.size:
             lo = hi = float(nan_as)
         stats = ValueRange(lo, hi, 0)
     return arr, stats
+
+
+def _replace_nonfinite(arr: np.ndarray, count: int, nan_as: float | None, src: str) -> np.ndarray:
+    """A copy of ``arr`` with its ``count`` NaN/Inf samples set to ``nan_as`` (None: refuse)."""
+    if nan_as is None:
+        raise VolumeError(
+            f"{src}: {count} samples are NaN or infinite; pass --nan-as VALUE "
+            "(nan_as=) to treat them as that value"
+        )
+    return np.where(np.isfinite(arr), arr, arr.dtype.type(nan_as))
 
 
 def _narrow_int64(data: np.ndarray, src: str) -> np.ndarray:
@@ -268,12 +273,7 @@ def prepare(
 
     rows = scan(arr)
     if rows.nonfinite:
-        if nan_as is None:
-            raise VolumeError(
-                f"{src}: {rows.nonfinite} samples are NaN or infinite; pass --nan-as VALUE "
-                "(nan_as=) to treat them as that value"
-            )
-        arr = np.where(np.isfinite(arr), arr, arr.dtype.type(nan_as))
+        arr = _replace_nonfinite(arr, rows.nonfinite, nan_as, src)
         rows = scan(arr)
     check_level(level, ValueRange(rows.min, rows.max, 0), src)
     offset, note = resolve_vertex_offset(arr.dtype, level, vertex_offset, rows.equal)
