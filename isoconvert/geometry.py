@@ -56,25 +56,65 @@ def flat_triangles(vertices: np.ndarray, cells: np.ndarray, cross: np.ndarray) -
     -------
     (C,) bool
     """
-    v = np.asarray(vertices, dtype=np.float64)
     norm = np.linalg.norm(cross, axis=1)
-    # The bound is at most k * eps * M * 2 sqrt(3) M for M the largest finite
-    # coordinate (m <= M, and no edge is longer than the diagonal of [-M, M]^3):
-    # triangles above that are not flat, and the exact bound is computed only
-    # for the rest (usually almost none).
-    finite = np.isfinite(v)
-    big = float(np.abs(v[finite]).max()) if finite.any() else 0.0
-    coarse = FLAT_ROUNDING_UNITS * np.finfo(np.float64).eps * big * (2.0 * np.sqrt(3.0) * big)
-    candidates = np.flatnonzero(~(norm > coarse * (1.0 + 1e-9)))
+    # Triangles above the coarse bound are not flat; the exact bound is
+    # computed only for the rest (usually almost none).
+    candidates = np.flatnonzero(~(norm > flat_bound(vertices)))
     flat = np.zeros(len(cells), dtype=bool)
     if len(candidates):
-        corners = v[np.asarray(cells)[candidates]]  # (K, 3, 3)
-        magnitude = np.abs(corners).max(axis=(1, 2))
-        edges = corners - np.roll(corners, -1, axis=1)
-        longest = np.sqrt((edges**2).sum(axis=2).max(axis=1))
-        bound = FLAT_ROUNDING_UNITS * np.finfo(np.float64).eps * magnitude * longest
-        flat[candidates] = norm[candidates] <= bound
+        flat[candidates] = flat_among(vertices, np.asarray(cells)[candidates], norm[candidates])
     return flat
+
+
+def flat_bound(vertices: np.ndarray, magnitude: float | None = None) -> float:
+    """A ``|cross|`` above which no triangle of ``vertices`` is flat.
+
+    The bound of :func:`flat_triangles` is at most ``k * eps * M * 2 sqrt(3) M``
+    for ``M`` the largest finite absolute coordinate (``m <= M``, and no edge is
+    longer than the diagonal of ``[-M, M]^3``); this is that, with a margin.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    magnitude : float, optional
+        ``M`` when the caller knows it (:func:`isoconvert.graph.merge_positions`
+        finds it); else it is computed from ``vertices``.
+    """
+    if magnitude is not None:
+        big = float(magnitude)
+    else:
+        v = np.asarray(vertices, dtype=np.float64)
+        if v.size == 0:
+            big = 0.0
+        elif np.isfinite(v).all():  # the usual case, without a masked copy
+            big = float(max(v.max(), -v.min()))
+        else:
+            finite = np.isfinite(v)
+            big = float(np.abs(v[finite]).max()) if finite.any() else 0.0
+    coarse = FLAT_ROUNDING_UNITS * np.finfo(np.float64).eps * big * (2.0 * np.sqrt(3.0) * big)
+    return coarse * (1.0 + 1e-9)
+
+
+def flat_among(vertices: np.ndarray, cells: np.ndarray, norm: np.ndarray) -> np.ndarray:
+    """The exact test of :func:`flat_triangles`, for a few triangles.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    cells : (K, 3) int
+    norm : (K,) float64
+        ``|cross|`` of each triangle (:func:`triangle_cross`).
+
+    Returns
+    -------
+    (K,) bool
+    """
+    corners = np.asarray(vertices, dtype=np.float64)[cells]  # (K, 3, 3)
+    magnitude = np.abs(corners).max(axis=(1, 2))
+    edges = corners - np.roll(corners, -1, axis=1)
+    longest = np.sqrt((edges**2).sum(axis=2).max(axis=1))
+    bound = FLAT_ROUNDING_UNITS * np.finfo(np.float64).eps * magnitude * longest
+    return norm <= bound
 
 
 def normalized_grid(grid: object) -> dict | None:

@@ -1,8 +1,15 @@
-"""Graph helpers in plain numpy (no numba: `check` must start fast)."""
+"""Graph helpers: plain numpy, and the compiled kernels of ``isoconvert._native``
+that merge positions and build edge tables (no numba: `check` must start fast)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+
+from .threads import kernel_threads
+
+_INT32_MAX = np.iinfo(np.int32).max
 
 
 def connected_components(n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -108,3 +115,103 @@ def group_sizes(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     starts = np.concatenate([[0], change]).astype(np.int64)
     sizes = np.diff(np.concatenate([starts, [len(keys)]])).astype(np.int64)
     return order, starts, sizes
+
+
+# --- compiled kernels ----------------------------------------------------------------------
+
+
+def index_dtype(*counts: int) -> np.dtype:
+    """int32 when every index the kernels form (below each of ``counts``) fits
+    in it, else int64: half the memory traffic for any mesh that allows it."""
+    return np.dtype(np.int32 if max(counts, default=0) <= _INT32_MAX else np.int64)
+
+
+@dataclass(frozen=True)
+class MergedPositions:
+    """Vertices at equal positions, from :func:`merge_positions`.
+
+    Attributes
+    ----------
+    rep : (V,) int32 or int64
+        For each vertex, the smallest index of a vertex at the same position.
+    key : (V,) uint64
+        Equal for equal positions; ordering the distinct positions by key is
+        the order :func:`row_groups` gives them (by :func:`mix64` hash, or
+        lexicographically when two positions share a hash).
+    unique : int
+        Number of distinct positions.
+    lexicographic : bool
+        Keys are ranks in lexicographic order (two positions shared a hash).
+    magnitude : float
+        The largest absolute finite coordinate (0.0 when there is none).
+    """
+
+    rep: np.ndarray
+    key: np.ndarray
+    unique: int
+    lexicographic: bool
+    magnitude: float
+
+    def ranks(self, vertices: np.ndarray) -> np.ndarray:
+        """(K,) int64 number of each vertex's position in key order, 0..unique-1
+        (what :func:`row_groups` numbers it); sorts the keys unless they are ranks."""
+        if self.lexicographic:
+            return self.key[vertices].astype(np.int64)
+        firsts = self.rep == np.arange(len(self.rep))
+        return np.searchsorted(np.sort(self.key[firsts]), self.key[vertices]).astype(np.int64)
+
+
+def merge_positions(
+    vertices: np.ndarray, threads: int | None = None, dtype: np.dtype | None = None
+) -> MergedPositions:
+    """Find vertices at exactly equal positions (-0.0 and 0.0 are equal).
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    threads : int, optional
+        Default :func:`kernel_threads`.
+    dtype : int32 or int64, optional
+        Of ``rep``; default :func:`index_dtype` of V.
+
+    Returns
+    -------
+    MergedPositions
+    """
+    from . import _native
+
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    itype = np.dtype(dtype or index_dtype(len(v)))
+    merge = _native.merge_positions_int32 if itype == np.int32 else _native.merge_positions_int64
+    rep, key, unique, lexicographic, magnitude = merge(v, threads or kernel_threads())
+    return MergedPositions(rep, key, int(unique), bool(lexicographic), float(magnitude))
+
+
+def edge_table(triangles: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """The undirected edges of triangles and how many triangles use each.
+
+    Triangles that repeat a vertex index are skipped (they are no 2-cells).
+
+    Parameters
+    ----------
+    triangles : (F, 3) int
+        Vertex indices in ``0..n_vertices-1`` (not checked here).
+    n_vertices : int
+
+    Returns
+    -------
+    edges : (E, 2) int64
+        Each edge once, lower index first, ordered by lower then higher index.
+    counts : (E,) int64
+        Its multiplicity: 1 on a boundary, 2 inside a manifold, more where it
+        is not.
+    """
+    from . import _native
+
+    itype = index_dtype(n_vertices, 3 * len(triangles))
+    tv = np.ascontiguousarray(triangles, dtype=itype).reshape(-1, 3)
+    key = np.zeros(n_vertices, np.uint64)
+    table = _native.topology(tv, n_vertices, key, kernel_threads(), True, wide=itype == np.int64)
+    edges, counts = table["all_edges"], table["all_counts"]
+    order = np.lexsort((edges[:, 1], edges[:, 0]))  # the kernel lists them by lower end only
+    return edges[order], counts[order]

@@ -8,6 +8,7 @@ told; STL, which has no indices, is read by trimesh.
 
 from __future__ import annotations
 
+import mmap
 import re
 import warnings
 from dataclasses import dataclass, field
@@ -223,7 +224,7 @@ def _ply_header(path: Path, fh) -> _PlyHeader:
 def _read_ply(path: Path) -> Mesh:
     with open(path, "rb") as fh:
         header = _ply_header(path, fh)
-        body = fh.read()
+        body = fh.read() if header.format == "ascii" else _mapped(fh, header.size)
     by_name = {e.name: e for e in header.elements}
     vertex = by_name.get("vertex")
     props = {p.name: p for p in vertex.properties} if vertex else {}
@@ -243,23 +244,27 @@ def _read_ply(path: Path) -> Mesh:
         data = _ply_ascii(path, header, body, wanted)
     else:
         data = _ply_binary(path, header, body, wanted)
-    vertices = np.column_stack([data["vertex"][a] for a in "xyz"]).astype(np.float64)
-    vertices = _as_stored(vertices.reshape(-1, 3), precision)
+    # one converting copy per column, straight from the file's records
+    columns = [data["vertex"][a] for a in "xyz"]
+    vertices = np.empty((len(columns[0]), 3), np.float64)
+    for axis, column in enumerate(columns):
+        vertices[:, axis] = column
+    if precision == "float32" and any(props[a].dtype != "f4" for a in "xyz"):
+        vertices = _as_stored(vertices, precision)  # float beside double coordinates
     n = len(vertices)
     if "face" in wanted:
         cells, owner = _fans(path, data["face"], "face")
         kind = "face"
     else:
         cells = np.column_stack([data["edge"]["vertex1"], data["edge"]["vertex2"]]).astype(np.int64)
-        owner = np.arange(len(cells))
+        owner = None
         kind = "edge"
-    bad = (cells < 0) | (cells >= n)
-    if bad.any():
+    if cells.size and (cells.min() < 0 or cells.max() >= n):
+        bad = (cells < 0) | (cells >= n)
         row = int(np.flatnonzero(bad.any(axis=1))[0])
         index = int(cells[row][bad[row]][0])
-        raise FormatError(
-            f"{path}: {kind} {int(owner[row])} refers to vertex {index}, {_why(index, n)}"
-        )
+        cell = row if owner is None else int(owner[row])
+        raise FormatError(f"{path}: {kind} {cell} refers to vertex {index}, {_why(index, n)}")
     info: dict = {"source": str(path), "stored_precision": precision}
     grid = _first_grid(header.comments)
     if grid is not None:
@@ -286,14 +291,29 @@ def _face_list(element: _Element) -> str:
     raise _Unreadable(f"the PLY face element has no list of vertex indices ({element.name})")
 
 
-def _fans(path: Path, faces: dict, kind: str) -> tuple[np.ndarray, np.ndarray]:
-    """Triangles (T, 3) int64 of polygons, and the polygon each comes from (T,)."""
+def _mapped(fh, start: int):
+    """The bytes of an open file from ``start`` on, memory-mapped (no copy of a
+    file of millions of triangles; the page cache serves it), or read when the
+    file cannot be mapped."""
+    try:
+        whole = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+    except (OSError, ValueError):  # an empty file, or one mmap does not serve
+        fh.seek(start)
+        return fh.read()
+    return memoryview(whole)[start:]
+
+
+def _fans(path: Path, faces: dict, kind: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """Triangles (T, 3) int64 of polygons, and the polygon each comes from (T,),
+    None when that is the triangle itself (all polygons are triangles)."""
     lists = faces["__lists__"]
     if isinstance(lists, np.ndarray):  # every polygon has the same size
         polygons = lists.astype(np.int64)
         size = polygons.shape[1]
         if size < 3:
             raise _Unreadable(f"{kind} 0 has {size} vertices; a face needs 3 or more")
+        if size == 3:
+            return polygons, None
         fan = np.arange(1, size - 1)
         cells = np.stack(
             [np.repeat(polygons[:, :1], size - 2, axis=1), polygons[:, fan], polygons[:, fan + 1]],

@@ -44,7 +44,15 @@ when the precision is not stated, when every coordinate is a float32 value):
 ``4 * 2**-24 * (|p| @ |A^-1|.T)`` index units per axis for a point ``p`` and
 the grid's index-to-world matrix ``A``.
 
-Everything is vectorized numpy; no numba, so ``isoconvert check`` starts fast.
+Speed and memory
+----------------
+The triangle checks are three passes of compiled kernels (``src/report.cpp``,
+in ``isoconvert._native``): merging equal positions by hash buckets, one pass
+over the triangles, and one over the vertices with their corners listed by a
+counting sort (the edges of a vertex are its corners' two neighbours). No
+pass sorts the whole mesh, and the memory they need is of the order of the
+mesh's own (int32 indices where they fit). Contour segments, which are small,
+are checked with vectorized numpy. No numba, so ``isoconvert check`` starts fast.
 """
 
 from __future__ import annotations
@@ -55,10 +63,20 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .checks import CHECK_NAMES, SEGMENT_CHECKS, TRIANGLE_CHECKS
 from .errors import FormatError, IsoconvertError, one_line
-from .geometry import flat_triangles, normalized_grid, triangle_cross
-from .graph import connected_components, group_sizes, row_groups
+from .geometry import flat_among, flat_bound, normalized_grid, triangle_cross
+from .graph import (
+    MergedPositions,
+    connected_components,
+    group_sizes,
+    index_dtype,
+    merge_positions,
+    mix64,
+    row_groups,
+)
 from .mesh import Mesh
+from .threads import kernel_threads
 
 if TYPE_CHECKING:
     from .volume import Volume
@@ -66,28 +84,6 @@ if TYPE_CHECKING:
 SCHEMA_VERSION = 1
 #: The JSON schema of :meth:`Report.to_dict`, shipped with the package.
 SCHEMA_PATH = Path(__file__).with_name("report.schema.json")
-
-#: Checks on triangle meshes, for ``--require``.
-TRIANGLE_CHECKS = {
-    "watertight": "every edge in exactly two triangles",
-    "manifold": "no edge in more than two triangles; triangles around a vertex form one fan",
-    "oriented": "triangles sharing an edge use it in opposite directions",
-    "no-zero-length": "no edge whose ends are at the same position",
-    "no-degenerate": "no triangle with a repeated vertex or zero area",
-    "no-duplicates": "no triangle listed twice",
-    "no-holes": "boundary edges only on the grid (or bounding-box) boundary",
-}
-#: Checks on contour segments, for ``--require``.
-SEGMENT_CHECKS = {
-    "watertight": "every polyline closed (every vertex ends one segment and starts one)",
-    "manifold": "no vertex in more than two segments",
-    "oriented": "polylines run one way (no vertex starts or ends two segments)",
-    "no-zero-length": "no segment whose ends are at the same position",
-    "no-degenerate": "no segment with a repeated vertex",
-    "no-duplicates": "no segment listed twice",
-    "no-holes": "open polylines end only on the grid (or bounding-box) boundary",
-}
-CHECK_NAMES = tuple(TRIANGLE_CHECKS)
 
 
 @dataclass
@@ -206,10 +202,16 @@ def _stored_precision(info: dict, vertices: np.ndarray) -> str:
     stated = info.get("stored_precision")
     if stated in _UNIT_ROUNDOFF:
         return stated
-    with np.errstate(over="ignore", invalid="ignore"):
-        as32 = vertices.astype(np.float32)
-    exact = (as32 == vertices) | ~np.isfinite(vertices)
-    return "float32" if len(vertices) and exact.all() else "float64"
+    if not len(vertices):
+        return "float64"
+    flat = vertices.reshape(-1)
+    # a few thousand coordinates settle most float64 meshes without a pass over all
+    for part in (flat[:4096], flat):
+        with np.errstate(over="ignore", invalid="ignore"):
+            as32 = part.astype(np.float32)
+        if not ((as32 == part) | ~np.isfinite(part)).all():
+            return "float64"
+    return "float32"
 
 
 class _Frame:
@@ -237,12 +239,19 @@ class _Frame:
             self.name = "bounding box"
             self._origin = None
             self._nd = 3
+            self._lo = None  # the box is measured on first use (most meshes need no box)
+
+    def _measure_box(self) -> None:
+        vertices = self._vertices
+        if np.isfinite(vertices).all():
+            finite = vertices
+        else:
             finite = vertices[np.isfinite(vertices).all(axis=1)]
-            self._lo = finite.min(axis=0) if len(finite) else np.zeros(3)
-            self._hi = finite.max(axis=0) if len(finite) else np.zeros(3)
-            extent = float(np.max(self._hi - self._lo))
-            self._magnitude = float(np.abs(finite).max()) if len(finite) else 0.0
-            self._base = 1e-9 * max(extent, 1e-300)
+        self._lo = finite.min(axis=0) if len(finite) else np.zeros(3)
+        self._hi = finite.max(axis=0) if len(finite) else np.zeros(3)
+        extent = float(np.max(self._hi - self._lo))
+        self._magnitude = float(max(np.abs(self._lo).max(), np.abs(self._hi).max()))
+        self._base = 1e-9 * max(extent, 1e-300)
 
     def roundoff(self) -> float:
         """Unit roundoff of the stored coordinates (decided on first use)."""
@@ -268,6 +277,8 @@ class _Frame:
             tol = _GRID_TOLERANCE + slack * (np.abs(p) @ self._abs_inverse.T)
             p = (p - self._origin) @ self._inverse.T
         else:
+            if self._lo is None:
+                self._measure_box()
             tol = max(self._base, slack * self._magnitude)
         low = np.abs(p - self._lo) <= tol
         high = np.abs(p - self._hi) <= tol
@@ -374,8 +385,11 @@ def check_mesh(
         The arrays do not have the shapes above.
     """
     name = source or str(mesh.info.get("source", "")) or "mesh"
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    cells = np.asarray(mesh.cells, dtype=np.int64)
+    # C order for the kernels (no copy when it is already); int32 cells stay int32
+    vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+    cells = np.asarray(mesh.cells)
+    index = np.int32 if cells.dtype == np.int32 else np.int64
+    cells = np.ascontiguousarray(cells, dtype=index)
     if (
         vertices.ndim != 2
         or vertices.shape[1] != 3
@@ -384,7 +398,6 @@ def check_mesh(
     ):
         raise IsoconvertError(f"{name}: expected (V, 3) vertices and (C, 3) or (C, 2) cells")
     _check_indices(cells, len(vertices), name)
-    finite = np.isfinite(vertices).all(axis=1)
     if grid is None:
         grid = mesh.info.get("grid")
     frame = _Frame(vertices, grid, mesh.info, name)
@@ -393,7 +406,10 @@ def check_mesh(
     else:
         report = _check_segments(vertices, cells, frame, examples)
     report.source = source or str(mesh.info.get("source", ""))
-    bad = np.flatnonzero(~finite)
+    if np.isfinite(vertices).all():  # a whole-array test first: per row costs 15 times more
+        bad = np.zeros(0, np.int64)
+    else:
+        bad = np.flatnonzero(~np.isfinite(vertices).all(axis=1))
     report.problems["non_finite_vertices"] = _problem(
         len(bad), [{"vertex": int(i)} for i in bad[:examples]]
     )
@@ -424,18 +440,35 @@ def _check_indices(cells: np.ndarray, n_vertices: int, name: str) -> None:
 
 
 def _check_triangles(vertices, cells, frame, n_examples) -> Report:
+    """The report on triangles, from three compiled passes (``src/report.cpp``).
+
+    Vertices are named by their representative, the smallest index at their
+    position, so the passes keep the memory order of the mesh. Lists come back
+    in representative order; examples are then put in the order the report has
+    always used, that of the merged positions (:func:`~isoconvert.graph.row_groups`),
+    which the keys of :func:`~isoconvert.graph.merge_positions` give.
+    """
+    from . import _native
+
     n_vertices, n_tris = len(vertices), len(cells)
-    unique, inverse, first = _merge(vertices)
-    tris = inverse[cells]
+    threads = kernel_threads()
+    itype = index_dtype(n_vertices, 3 * n_tris)
+    merged = merge_positions(vertices, threads, itype)
+    key, n_u = merged.key, merged.unique
     problems: dict = {}
 
-    # edges of the input, by vertex index; zero-length when the ends coincide
-    ea = cells.reshape(-1)
-    eb = np.roll(cells, -1, axis=1).reshape(-1)
-    collapsed = (inverse[ea] == inverse[eb]) & (ea != eb)
-    zero_keys = np.unique(
-        np.minimum(ea, eb)[collapsed] * n_vertices + np.maximum(ea, eb)[collapsed]
+    # tv (F, 3): each corner's representative, which is the cell's own vertex
+    # when no two vertices share a position (the input then serves as it is);
+    # area2: the sum of |cross| as numpy would compute it, to the bit
+    merging = n_u < n_vertices
+    tv, area2, repeated, candidates, collapsed = _native.triangle_pass(
+        cells, merged.rep, vertices, flat_bound(vertices, merged.magnitude), threads, merging
     )
+    if not merging:
+        tv = cells
+
+    # edges of the input, by vertex index, whose ends are at one position
+    zero_keys = np.unique(collapsed[:, 0] * n_vertices + collapsed[:, 1])
     zero = np.column_stack([zero_keys // max(n_vertices, 1), zero_keys % max(n_vertices, 1)])
     problems["zero_length_edges"] = _problem(
         len(zero),
@@ -447,112 +480,88 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
 
     # degenerate triangles: a repeated position (not a 2-cell), or flat (a 2-cell
     # of zero area within rounding); see the module docstring
-    repeated = (tris[:, 0] == tris[:, 1]) | (tris[:, 1] == tris[:, 2]) | (tris[:, 0] == tris[:, 2])
-    cross = triangle_cross(unique, tris)
-    area2 = np.linalg.norm(cross, axis=1)
-    flat = flat_triangles(unique, tris, cross) & ~repeated
-    degenerate = repeated | flat
-    examples_deg = [
-        {
-            "triangle": int(t),
-            "reason": "repeated vertex" if repeated[t] else "zero area",
-            "position": _pos(unique[tris[t, 0]]),
-        }
-        for t in np.flatnonzero(degenerate)[:n_examples]
-    ]
-    problems["degenerate_triangles"] = _problem(degenerate.sum(), examples_deg)
-
-    n_u = len(unique)
-    if repeated.any():
-        keep = np.flatnonzero(~repeated)  # the 2-cells
-        tv = tris[keep]
-        referenced = np.zeros(n_u, dtype=bool)
-        referenced[tris.reshape(-1)] = True
-        n_referenced = int(referenced.sum())
+    if len(candidates):
+        corners = tv[candidates]
+        norm = np.linalg.norm(triangle_cross(vertices, corners), axis=1)
+        flat = candidates[flat_among(vertices, corners, norm)]
     else:
-        keep = np.arange(n_tris)
-        tv = tris
-        n_referenced = -1  # every vertex a 2-cell uses: set below
+        flat = candidates
+    degenerate = np.union1d(repeated, flat)
+    shown = degenerate[:n_examples]
+    problems["degenerate_triangles"] = _problem(
+        len(degenerate),
+        [
+            {
+                "triangle": int(t),
+                "reason": "repeated vertex" if is_repeated else "zero area",
+                "position": _pos(vertices[tv[t, 0]] + 0.0),
+            }
+            for t, is_repeated in zip(shown, np.isin(shown, repeated), strict=True)
+        ],
+    )
 
-    # edges of the kept triangles: occurrence o = 3 * i + j runs tv[i, j] -> tv[i, j + 1]
-    a = tv.reshape(-1)
-    b = np.roll(tv, -1, axis=1).reshape(-1)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    order, starts, sizes = group_sizes(lo * n_u + hi)
-    first_occ = order[starts]
-    edge_lo, edge_hi = lo[first_occ], hi[first_occ]
-    n_edges = len(starts)
+    # edges, orientation, fans, duplicates and components of the 2-cells
+    table = _native.topology(tv, n_vertices, key, threads, False, wide=itype == np.int64)
+    used = table["used"]  # (V,) uint8: in a 2-cell
+    n_edges, n_used, n_kept = table["edges"], table["used_vertices"], table["kept"]
 
-    boundary = np.flatnonzero(sizes == 1)
-    on_domain = frame.same_face(unique[edge_lo[boundary]], unique[edge_hi[boundary]])
-    holes = boundary[~on_domain]
-
-    def edge_examples(groups):
+    def edge_examples(edges):
+        lo, hi = _first_edges(edges, key, n_examples)
         return [
             {
-                "vertices": [int(first[edge_lo[g]]), int(first[edge_hi[g]])],
-                "position": _pos(0.5 * (unique[edge_lo[g]] + unique[edge_hi[g]])),
+                "vertices": [int(a), int(b)],
+                "position": _pos(0.5 * ((vertices[a] + 0.0) + (vertices[b] + 0.0))),
             }
-            for g in groups[:n_examples]
+            for a, b in zip(lo, hi, strict=True)
         ]
 
+    boundary = table["boundary"]
+    on_domain = frame.same_face(vertices[boundary[:, 0]], vertices[boundary[:, 1]])
+    holes = boundary[~on_domain]
     problems["boundary_edges_on_domain_boundary"] = _problem(
         on_domain.sum(), edge_examples(boundary[on_domain])
     )
     problems["boundary_edges_inside"] = _problem(len(holes), edge_examples(holes))
-    nonmanifold_edges = np.flatnonzero(sizes > 2)
+    nonmanifold_edges = table["non_manifold_edges"]
     problems["non_manifold_edges"] = _problem(
         len(nonmanifold_edges), edge_examples(nonmanifold_edges)
     )
-
-    # orientation: an edge shared by two triangles must be used once each way
-    pairs = np.flatnonzero(sizes == 2)
-    o1, o2 = order[starts[pairs]], order[starts[pairs] + 1]
-    same_way = a[o1] == a[o2]
+    inconsistent = table["inconsistent"]
     problems["inconsistently_oriented_edges"] = _problem(
-        same_way.sum(), edge_examples(pairs[same_way])
+        len(inconsistent), edge_examples(inconsistent)
     )
 
-    # duplicate triangles (same three vertices, either orientation)
-    duplicates = _duplicate_triangles(tv, o1, o2, len(nonmanifold_edges) == 0)
+    duplicates = _duplicate_groups(table, tv, merged, len(nonmanifold_edges) == 0)
     problems["duplicate_triangles"] = _problem(
         sum(len(g) - 1 for g in duplicates),
         [
-            {"triangles": [int(keep[t]) for t in g], "position": _pos(unique[tv[g[0], 0]])}
+            {"triangles": [int(t) for t in g], "position": _pos(vertices[tv[g[0], 0]] + 0.0)}
             for g in duplicates[:n_examples]
         ],
     )
 
-    fans = _fans_per_vertex(a, o1, o2, same_way, n_u, len(nonmanifold_edges) == 0)
-    bad_vertices = np.flatnonzero(fans > 1)
+    bad_vertices = table["non_manifold_vertices"]
+    fans = table["fans"]
+    shown = np.argsort(key[bad_vertices], kind="stable")[:n_examples]
     problems["non_manifold_vertices"] = _problem(
         len(bad_vertices),
         [
-            {"vertex": int(first[w]), "fans": int(fans[w]), "position": _pos(unique[w])}
-            for w in bad_vertices[:n_examples]
+            {
+                "vertex": int(bad_vertices[i]),
+                "fans": int(fans[i]),
+                "position": _pos(vertices[bad_vertices[i]] + 0.0),
+            }
+            for i in shown
         ],
     )
 
-    # components, Euler characteristic and genus, of the 2-cells
-    used = np.flatnonzero(np.bincount(tv.reshape(-1), minlength=n_u))
-    if n_referenced < 0:
-        n_referenced = len(used)
-    comp = connected_components(n_u, edge_lo, edge_hi)
-    comp_of, n_comp = _renumber(comp, used)
-    lookup = np.full(n_u, -1, dtype=np.int64)
-    lookup[used] = comp_of
-    v_c = np.bincount(comp_of, minlength=n_comp)
-    e_c = np.bincount(lookup[edge_lo], minlength=n_comp)
-    f_c = np.bincount(lookup[tv[:, 0]], minlength=n_comp) if len(tv) else np.zeros(n_comp, int)
-    open_c = np.bincount(lookup[edge_lo[sizes != 2]], minlength=n_comp) > 0
-    bad_c = (
-        np.bincount(lookup[bad_vertices], minlength=n_comp) > 0
-        if len(bad_vertices)
-        else np.zeros(n_comp, bool)
-    )
+    # components, Euler characteristic and genus; components numbered as the
+    # merged positions order their smallest vertex, then by size
+    v_c, e_c, f_c = table["comp_vertices"], table["comp_edges"], table["comp_triangles"]
+    open_c, bad_c = table["comp_open"].astype(bool), table["comp_bad"].astype(bool)
     chi_c = v_c - e_c + f_c
     components = []
-    for c in np.argsort(-f_c, kind="stable"):
+    for c in np.lexsort((table["comp_min_key"], -f_c)):
         entry = {
             "triangles": int(f_c[c]),
             "vertices": int(v_c[c]),
@@ -563,17 +572,21 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
             entry["genus"] = int((2 - chi_c[c]) // 2)
         components.append(entry)
 
-    watertight = len(tv) > 0 and len(boundary) == 0 and len(nonmanifold_edges) == 0
-    oriented = not same_way.any()
+    if len(repeated):  # their vertices are referenced, though no 2-cell uses them
+        referenced = used.view(bool).copy()
+        referenced[tv[repeated].reshape(-1)] = True
+        n_referenced = int(np.count_nonzero(referenced))
+    else:
+        n_referenced = n_used
+    watertight = n_kept > 0 and len(boundary) == 0 and len(nonmanifold_edges) == 0
+    oriented = len(inconsistent) == 0
     # a repeated position makes the cross product exactly zero: summing over
     # every triangle is summing over the 2-cells
-    area = 0.5 * float(area2.sum())
-    measures = {"area": area}
+    measures = {"area": 0.5 * area2}
     if watertight and oriented:
-        # det[p0 - c, p1 - c, p2 - c] = (p0 - c) . ((p1 - p0) x (p2 - p0)); c near the
-        # mesh keeps the sum well conditioned
-        c = unique[used].mean(axis=0)
-        measures["volume"] = float(np.einsum("ij,ij->", unique[tris[:, 0]] - c, cross) / 6.0)
+        # det[p0 - c, p1 - c, p2 - c] with c the mean used position, which keeps
+        # the sum well conditioned
+        measures["volume"] = float(_native.enclosed_volume(vertices, tv, used, threads))
 
     counts = {
         "vertices": n_vertices,
@@ -587,96 +600,88 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
         "manifold": bool(len(nonmanifold_edges) == 0 and len(bad_vertices) == 0),
         "oriented": bool(oriented),
         "no-zero-length": bool(len(zero) == 0),
-        "no-degenerate": bool(not degenerate.any()),
+        "no-degenerate": bool(len(degenerate) == 0),
         "no-duplicates": bool(len(duplicates) == 0),
         "no-holes": bool(len(holes) == 0),
     }
     topology = {
-        "components": n_comp,
-        "euler_characteristic": int(len(used) - n_edges + len(tv)),
+        "components": len(components),
+        "euler_characteristic": int(n_used - n_edges + n_kept),
         "per_component": components,
     }
     return Report("triangles", counts, checks, problems, topology, measures, frame.name)
 
 
-def _duplicate_triangles(tv, o1, o2, edge_manifold) -> list[list[int]]:
-    """Groups of triangles with the same three vertices (indices into ``tv``).
-
-    When no edge has more than two triangles, two triangles are duplicates
-    exactly when all three of their edges pair them with each other, which the
-    edge pairs (occurrences ``o1``, ``o2``) tell without sorting triangles.
-    """
-    if edge_manifold:
-        partner = np.full(3 * len(tv), -1, dtype=np.int64)
-        partner[o1] = o2 // 3
-        partner[o2] = o1 // 3
-        p = partner.reshape(-1, 3)
-        same = (p[:, 0] >= 0) & (p[:, 0] == p[:, 1]) & (p[:, 1] == p[:, 2])
-        first = np.flatnonzero(same & (np.arange(len(tv)) < p[:, 0]))
-        return [[int(i), int(p[i, 0])] for i in first]
-    order, new = row_groups(np.sort(tv, axis=1))
-    starts = np.flatnonzero(new)
-    sizes = np.diff(np.append(starts, len(tv)))
-    return [
-        [int(t) for t in order[starts[g] : starts[g] + sizes[g]]] for g in np.flatnonzero(sizes > 1)
-    ]
-
-
-def _fans_per_vertex(a, o1, o2, same_way, n_u, edge_manifold) -> np.ndarray:
-    """Number of fans (groups of triangles joined across edges) at each vertex.
-
-    Corners are the (triangle, vertex) pairs: corner ``c = 3 * i + j`` sits at
-    vertex ``a[c]``. Two triangles sharing a manifold edge join their corners at
-    both ends of it. A vertex whose corners form more than one group is
-    non-manifold (e.g. where two surfaces touch at a point).
+def _first_edges(edges: np.ndarray, key: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The first ``n`` edges in the order of the merged positions.
 
     Parameters
     ----------
-    a : (3F,) int64
-        Vertex of each corner (edge occurrence ``o`` starts at corner ``o``).
-    o1, o2 : (P,) int64
-        The two occurrences of each edge used by exactly two triangles.
-    same_way : (P,) bool
-        Whether both use it in the same direction (inconsistent orientation).
-    n_u : int
-        Number of vertices.
+    edges : (E, 2) int
+        Representatives of each edge's ends.
+    key : (V,) uint64
+        Position keys (:func:`~isoconvert.graph.merge_positions`).
+    n : int
+
+    Returns
+    -------
+    lo, hi : (min(n, E),) int64
+        Each edge's ends, the one with the smaller key first, ordered by the
+        keys of ``lo`` then of ``hi`` (as the report has always listed them).
+    """
+    if n <= 0 or len(edges) == 0:
+        empty = np.zeros(0, np.int64)
+        return empty, empty
+    a, b = edges[:, 0].astype(np.int64), edges[:, 1].astype(np.int64)
+    swap = key[a] > key[b]
+    lo, hi = np.where(swap, b, a), np.where(swap, a, b)
+    k_lo = key[lo]
+    if len(lo) > 4 * n:  # only edges whose first key is among the n smallest can come first
+        cut = np.partition(k_lo, n - 1)[n - 1]
+        pick = np.flatnonzero(k_lo <= cut)
+        lo, hi, k_lo = lo[pick], hi[pick], k_lo[pick]
+    order = np.lexsort((key[hi], k_lo))[:n]
+    return lo[order], hi[order]
+
+
+def _duplicate_groups(
+    table: dict, tv: np.ndarray, merged: MergedPositions, edge_manifold: bool
+) -> list:
+    """Groups of triangles with the same three vertices, in the report's order.
+
+    Parameters
+    ----------
+    table : dict
+        From the topology kernel: ``dup_triangles`` and ``dup_starts`` (groups
+        found at their lowest edge, triangles ascending in each).
+    tv : (F, 3) int
+        Representatives of each triangle's corners.
+    merged : MergedPositions
     edge_manifold : bool
         No edge is used by more than two triangles.
+
+    Returns
+    -------
+    list of (k,) int64
+        When no edge is used by more than two triangles, pairs ordered by their
+        first triangle; otherwise groups ordered by the hash of their merged
+        vertex numbers (:func:`~isoconvert.graph.row_groups` of the sorted
+        triples), as the report has always listed them.
     """
-
-    def end(o):  # the corner where occurrence o ends
-        return o - o % 3 + (o % 3 + 1) % 3
-
-    n = len(a)
-    if n == 0:
-        return np.zeros(n_u, dtype=np.int64)
-    if edge_manifold and not same_way.any():
-        # Oriented: around each vertex the corners form chains (boundary) or cycles,
-        # "next" stepping across the edge that leaves the vertex. Label each chain
-        # by its last corner and each cycle by its smallest, with pointer doubling.
-        nxt = np.arange(n, dtype=np.int64)
-        # occurrence o1 runs v -> w from corner o1; the other triangle runs w -> v
-        # and ends at v in corner end(o2): its corner at v follows o1's
-        nxt[o1] = end(o2)
-        nxt[o2] = end(o1)
-        # after k rounds, low[c] is the smallest of the 2**k corners from c on and
-        # step[c] the corner 2**k on (or the chain's end); a chain or cycle is at
-        # most as long as its vertex has corners
-        rounds = int(np.ceil(np.log2(max(2, np.bincount(a).max()))))
-        low = np.arange(n, dtype=np.int64)
-        step = nxt
-        for _ in range(rounds):
-            low = np.minimum(low, low[step])
-            step = step[step]
-        chain = nxt[step] == step
-        labels = np.where(chain, step, low)
-    else:
-        u = np.concatenate([o1, end(o1)])
-        v = np.concatenate([np.where(same_way, o2, end(o2)), np.where(same_way, end(o2), o2)])
-        labels = connected_components(n, u, v)
-    # each group has exactly one corner that is its own label
-    roots = labels == np.arange(n)
-    return np.bincount(a[roots], minlength=n_u)
+    starts, members = table["dup_starts"], table["dup_triangles"]
+    groups = [members[starts[g] : starts[g + 1]] for g in range(len(starts) - 1)]
+    if len(groups) < 2:
+        return groups
+    if edge_manifold:
+        return sorted(groups, key=lambda g: int(g[0]))
+    firsts = np.array([g[0] for g in groups])
+    triples = np.sort(merged.ranks(tv[firsts].reshape(-1)).reshape(-1, 3), axis=1)
+    h = mix64(triples[:, 0])
+    for col in (1, 2):
+        h = mix64(h ^ triples[:, col].view(np.uint64))
+    # equal hashes of different triples (never seen) fall back to their order
+    order = np.lexsort((triples[:, 2], triples[:, 1], triples[:, 0], h))
+    return [groups[i] for i in order]
 
 
 # --- segments ----------------------------------------------------------------------------

@@ -19,6 +19,7 @@ using namespace nb::literals;
 using iso::i64;
 
 void bind_tetra_squares(nb::module_ &m);  // more.cpp
+void bind_report(nb::module_ &m);         // report.cpp
 
 namespace {
 
@@ -111,4 +112,5 @@ NB_MODULE(_native, m) {
   ISO_FOR_EACH_SAMPLE_TYPE(ISO_BIND)
 #undef ISO_BIND
   bind_tetra_squares(m);
+  bind_report(m);
 }
