@@ -15,7 +15,7 @@ import numpy as np
 
 from ..mesh import Mesh
 from ..volume import Volume
-from .placement import mesh_info, reversed_orientation
+from .placement import kernel_outputs, kernel_placement, mesh_info, reversed_orientation
 from .prepare import prepare
 from .tables import DEFAULT_AMBIGUITY, marching_cubes_table
 
@@ -138,24 +138,11 @@ class CubesBlock:
 
         counts, table = marching_cubes_table(self.ambiguity)
         n = _native.count_cubes(samples, scan, counts, table, self.threads)
-        verts = np.empty((n.vertices, 3), dtype=np.float64)
-        edge_ids = np.empty(n.vertices, dtype=np.int64)
-        tris = np.empty((n.triangles, 3), dtype=np.int64)
+        verts, edge_ids, tris = kernel_outputs(n.vertices, n.triangles, 3)
+        where = kernel_placement(
+            self.affine, self.origin, self.grid_shape[:2], self.offset, self.reverse, index_origin
+        )
         _native.fill_cubes(
-            samples,
-            scan,
-            n,
-            counts,
-            table,
-            np.ascontiguousarray(self.affine, dtype=np.float64),
-            np.ascontiguousarray(self.origin, dtype=np.float64),
-            np.asarray(index_origin, dtype=np.int64),
-            np.asarray(self.grid_shape[:2], dtype=np.int64),
-            self.offset,
-            self.reverse,
-            self.threads,
-            verts,
-            edge_ids,
-            tris,
+            samples, scan, n, counts, table, *where, self.threads, verts, edge_ids, tris
         )
         return verts, edge_ids, tris

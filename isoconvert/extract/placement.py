@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh import Mesh
 from ..report import grid_from_volume
 from ..volume import Volume
 
@@ -36,20 +35,53 @@ def mesh_info(
     return info
 
 
-def finish_mesh(
-    volume: Volume,
-    verts: np.ndarray,
-    cells: np.ndarray,
-    edge_ids: np.ndarray,
-    flip: bool,
-    method: str,
-    level: float,
-) -> Mesh:
-    """A Mesh from index-space vertices: moved to world space, oriented.
+def kernel_placement(
+    affine: np.ndarray,
+    origin: np.ndarray,
+    grid_xy: tuple[int, int],
+    offset: float,
+    reverse: bool,
+    index_origin: tuple[int, int, int] = (0, 0, 0),
+) -> tuple:
+    """The placement arguments every fill kernel of ``isoconvert._native`` takes.
 
-    For kernels that do not place vertices in world units themselves.
+    Parameters
+    ----------
+    affine : (3, 3) float
+        Index offsets to world offsets.
+    origin : (3,) float
+        World position of grid index (0, 0, 0).
+    grid_xy : (X, Y) of the whole grid, which numbers the edge ids.
+    offset : float
+        Vertex offset.
+    reverse : bool
+        Write cells in reverse orientation.
+    index_origin : (i0, j0, k0)
+        Grid index of the block's first sample.
+
+    Returns
+    -------
+    tuple
+        ``(affine, origin, index_origin, id_dims, offset, reverse)`` as the kernels want them.
     """
-    volume.index_to_world(verts)
-    if reversed_orientation(volume, flip):
-        cells = cells[:, ::-1].copy()
-    return Mesh(verts, cells, edge_ids, mesh_info(volume, method, level, flip))
+    return (
+        np.ascontiguousarray(affine, dtype=np.float64),
+        np.ascontiguousarray(origin, dtype=np.float64),
+        np.asarray(index_origin, dtype=np.int64),
+        np.asarray(grid_xy, dtype=np.int64),
+        float(offset),
+        bool(reverse),
+    )
+
+
+def kernel_outputs(
+    n_vertices: int, n_cells: int, arity: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Empty ``vertices (V, 3) float64``, ``edge_ids (V,) int64`` and ``cells
+    (C, arity) int64`` for a fill kernel (numpy backs large ones with huge pages,
+    which makes their first write cheaper)."""
+    return (
+        np.empty((n_vertices, 3), dtype=np.float64),
+        np.empty(n_vertices, dtype=np.int64),
+        np.empty((n_cells, arity), dtype=np.int64),
+    )

@@ -21,7 +21,7 @@ from ..errors import IsoconvertError
 from ..mesh import Mesh
 from ..methods import SQUARE_AMBIGUITY_RULES
 from ..volume import Volume
-from .placement import mesh_info, reversed_orientation
+from .placement import kernel_outputs, kernel_placement, mesh_info, reversed_orientation
 from .prepare import prepare
 from .tables import DEFAULT_AMBIGUITY, marching_squares_table
 
@@ -105,10 +105,14 @@ def marching_squares(
     n = _native.count_squares(f, prep.scan, a, counts, segments, prep.threads)
     if n.segments == 0:
         raise IsoconvertError(f"{volume.source}: no slice crosses level {prep.level:g}")
-    affine, origin = _placement3(volume)
-    verts = np.empty((n.vertices, 3), dtype=np.float64)
-    edge_ids = np.empty(n.vertices, dtype=np.int64)
-    segs = np.empty((n.segments, 2), dtype=np.int64)
+    verts, edge_ids, segs = kernel_outputs(n.vertices, n.segments, 2)
+    where = kernel_placement(
+        *_placement3(volume),
+        (f.shape[2], f.shape[1]),
+        prep.offset,
+        reversed_orientation(volume, flip),
+    )
+    rule = SQUARE_AMBIGUITY_RULES.index(ambiguity)  # as SquareRule in src/squares.hpp
     _native.fill_squares(
         f,
         prep.scan,
@@ -116,14 +120,9 @@ def marching_squares(
         a,
         counts,
         segments,
-        SQUARE_AMBIGUITY_RULES.index(ambiguity),  # as SquareRule in src/squares.hpp
+        rule,
         planar,
-        affine,
-        origin,
-        np.zeros(3, dtype=np.int64),
-        np.array([f.shape[2], f.shape[1]], dtype=np.int64),
-        prep.offset,
-        reversed_orientation(volume, flip),
+        *where,
         prep.threads,
         verts,
         edge_ids,

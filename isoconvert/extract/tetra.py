@@ -10,12 +10,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import numpy as np
-
 from ..errors import IsoconvertError
 from ..mesh import Mesh
 from ..volume import Volume
-from .placement import mesh_info, reversed_orientation
+from .placement import kernel_outputs, kernel_placement, mesh_info, reversed_orientation
 from .prepare import prepare
 from .tables import (
     CUBE_TETRAHEDRA,
@@ -68,23 +66,13 @@ def marching_tetrahedra(
     tables = (TETRA_DIRECTIONS, CUBE_TETRAHEDRA, counts, triangles, TETRA_EDGE_BASE, TETRA_EDGE_DIR)
     f = prep.array
     n = _native.count_tetra(f, prep.scan, *tables, prep.threads)
-    verts = np.empty((n.vertices, 3), dtype=np.float64)
-    edge_ids = np.empty(n.vertices, dtype=np.int64)
-    tris = np.empty((n.triangles, 3), dtype=np.int64)
-    _native.fill_tetra(
-        f,
-        prep.scan,
-        n,
-        *tables,
-        np.ascontiguousarray(volume.affine, dtype=np.float64),
-        np.ascontiguousarray(volume.origin, dtype=np.float64),
-        np.zeros(3, dtype=np.int64),
-        np.array([f.shape[2], f.shape[1]], dtype=np.int64),
+    verts, edge_ids, tris = kernel_outputs(n.vertices, n.triangles, 3)
+    where = kernel_placement(
+        volume.affine,
+        volume.origin,
+        (f.shape[2], f.shape[1]),
         prep.offset,
         reversed_orientation(volume, flip),
-        prep.threads,
-        verts,
-        edge_ids,
-        tris,
     )
+    _native.fill_tetra(f, prep.scan, n, *tables, *where, prep.threads, verts, edge_ids, tris)
     return Mesh(verts, tris, edge_ids, mesh_info(volume, "tetra", prep.level, flip, prep.offset))
