@@ -780,12 +780,12 @@ def info(
         allow_outside_data,
     )
     volume = read_volume(input, format=kwargs.pop("input_format"), **kwargs)
-    hist = histogram(volume.data)
+    hist = histogram(volume.samples)
     levels = suggested_levels(hist) if hist.counts.sum() else {}
     summary = {
         "source": volume.source,
         "shape": list(volume.shape),
-        "dtype": volume.data.dtype.name,
+        "dtype": volume.dtype.name,
         "spacing": volume.spacing.tolist(),
         "origin": volume.origin.tolist(),
         "direction": volume.direction.tolist(),
@@ -801,7 +801,7 @@ def info(
         return
     unit = f" {volume.unit}" if volume.unit else ""
     print(f"{volume.source}")
-    print(f"  shape     {' x '.join(map(str, volume.shape))}  ({volume.data.dtype.name})")
+    print(f"  shape     {' x '.join(map(str, volume.shape))}  ({volume.dtype.name})")
     print(f"  spacing   {' '.join(f'{s:g}' for s in volume.spacing)}{unit}")
     print(f"  origin    {' '.join(f'{s:g}' for s in volume.origin)}{unit}")
     if not (volume.direction == _identity(volume.ndim)).all():

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import VolumeError
+from .grid import LazyGrid
 
 #: dtypes the extractors accept without conversion (the kernels specialize on them).
 SUPPORTED_DTYPES = (
@@ -37,6 +38,9 @@ class Volume:
     ----------
     data : (X, Y, Z) or (X, Y) array
         The samples, any of :data:`SUPPORTED_DTYPES` (or convertible to one).
+        A volume may be made from a :class:`~isoconvert.grid.LazyGrid` instead
+        (then :attr:`grid`): ``data`` reads it whole on first use, while
+        block-wise extraction reads it slab by slab and never touches ``data``.
     spacing : (ndim,) float64
         Distance between neighbouring samples along each axis, > 0.
     origin : (ndim,) float64
@@ -61,13 +65,15 @@ class Volume:
     notes: list[str] = field(default_factory=list)
     unit: str | None = None
 
+    # where ``data`` lives (see the property at the end of this module)
+    _grid = None
+    _array = None
+
     def __post_init__(self) -> None:
-        if not isinstance(self.data, np.ndarray):
-            self.data = np.asarray(self.data)
-        nd = self.data.ndim
+        nd = self.ndim
         if nd not in (2, 3):
             raise VolumeError(
-                f"{self.source}: a volume needs 2 or 3 dimensions, got shape {self.data.shape}"
+                f"{self.source}: a volume needs 2 or 3 dimensions, got shape {self.shape}"
             )
         self.spacing = _vector(self.spacing, nd, 1.0, "spacing", self.source)
         self.origin = _vector(self.origin, nd, 0.0, "origin", self.source)
@@ -94,12 +100,31 @@ class Volume:
         return cls(np.asarray(array).T, **kwargs)
 
     @property
+    def grid(self) -> LazyGrid | None:
+        """The lazy grid the samples are read from, or None for an in-memory array."""
+        return self._grid
+
+    @property
+    def samples(self) -> np.ndarray | LazyGrid:
+        """The lazy grid when there is one, else ``data``: what scans that go
+        slab by slab (statistics, block-wise extraction) should read."""
+        return self._grid if self._grid is not None else self.data
+
+    @property
     def ndim(self) -> int:
-        return self.data.ndim
+        return len(self.shape)
 
     @property
     def shape(self) -> tuple[int, ...]:
-        return self.data.shape
+        return tuple(self.samples.shape)
+
+    @property
+    def dtype(self) -> np.dtype:
+        return self.samples.dtype
+
+    def __repr__(self) -> str:
+        kind = repr(self._grid) if self._grid is not None else f"array {self.shape}"
+        return f"Volume({kind}, spacing={self.spacing.tolist()}, source={self.source!r})"
 
     @property
     def affine(self) -> np.ndarray:
@@ -133,7 +158,7 @@ class Volume:
         """A copy of this volume's description (sharing ``data``) with spacing
         and/or origin replaced, e.g. from the command line."""
         return Volume(
-            self.data,
+            self.samples,
             spacing=self.spacing if spacing is None else spacing,
             origin=self.origin if origin is None else origin,
             direction=self.direction,
@@ -141,6 +166,24 @@ class Volume:
             notes=list(self.notes),
             unit=self.unit,
         )
+
+
+def _get_data(self: Volume) -> np.ndarray:
+    if self._array is None:
+        self._array = np.asarray(self._grid)
+    return self._array
+
+
+def _set_data(self: Volume, value) -> None:
+    if isinstance(value, LazyGrid):
+        self._grid, self._array = value, None
+    else:
+        self._grid = None
+        self._array = value if isinstance(value, np.ndarray) else np.asarray(value)
+
+
+# ``data`` reads a lazy grid on first use; the dataclass's __init__ goes through the setter.
+Volume.data = property(_get_data, _set_data, doc=Volume.__doc__ and "The samples (X, Y[, Z]).")
 
 
 def _vector(value, nd: int, default: float, name: str, source: str) -> np.ndarray:
@@ -155,13 +198,17 @@ def _vector(value, nd: int, default: float, name: str, source: str) -> np.ndarra
     return arr
 
 
-def slabs(data: np.ndarray):
+def slabs(data: np.ndarray | LazyGrid):
     """Yield contiguous slabs of ``data`` along its last (slowest) axis, each
-    about ``_CHUNK_SAMPLES`` samples, so that scans need no full-size temporary."""
+    about ``_CHUNK_SAMPLES`` samples, so that scans need no full-size temporary
+    (and a lazy grid is read one slab at a time)."""
     per_slice = max(1, int(np.prod(data.shape[:-1])))
     step = max(1, _CHUNK_SAMPLES // per_slice)
     for k in range(0, data.shape[-1], step):
-        yield data[..., k : k + step]
+        if isinstance(data, LazyGrid):
+            yield data.read_zyx(k, min(k + step, data.shape[2])).T
+        else:
+            yield data[..., k : k + step]
 
 
 @dataclass(frozen=True)

@@ -174,9 +174,9 @@ def extract(
     placement_note = None
     if "vertex_offset" in extractor.options and not extractor.prepared:
         given = options.get("vertex_offset")
-        equal = count_equal(volume.data, level) if given in (None, 0) else 0
+        equal = count_equal(volume.samples, level) if given in (None, 0) else 0
         options["vertex_offset"], placement_note = resolve_vertex_offset(
-            volume.data.dtype, float(level), given, equal
+            volume.dtype, float(level), given, equal
         )
     mesh = extractor.run(
         volume,
@@ -220,7 +220,7 @@ def resolve_level(volume: Volume, level: str, on_status: Callable[[str], None] |
     from ..stats import histogram, otsu_level
 
     if level.strip().lower() == "auto":
-        value = otsu_level(histogram(volume.data))
+        value = otsu_level(histogram(volume.samples))
         if on_status:
             on_status(f"level auto: Otsu threshold {value:g}")
         return value

@@ -275,12 +275,12 @@ def read_volume(
         raise FormatError(
             f"{spec}: not a readable {name} file ({type(exc).__name__}: {one_line(exc)})"
         ) from None
-    if volume.data.dtype.kind not in "biuf":
+    if volume.dtype.kind not in "biuf":
         raise VolumeError(
-            f"{spec}: samples of type {volume.data.dtype} are not real numbers; isoconvert "
+            f"{spec}: samples of type {volume.dtype} are not real numbers; isoconvert "
             "contours scalar volumes (convert to a real type first, e.g. the magnitude)"
         )
-    if volume.data.size == 0:
+    if 0 in volume.shape:
         raise VolumeError(f"{spec}: the volume is empty (shape {volume.shape})")
     if spacing is not None or origin is not None:
         volume = volume.with_placement(spacing, origin)

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import VolumeError
+from ..grid import RawGrid
 from ..volume import SUPPORTED_DTYPES, Volume
 from .options import ReadOptions
 
@@ -106,6 +107,10 @@ def read_raw(path: Path, options: ReadOptions) -> Volume:
     hint = byte_order_note(data, options.endian)
     if hint:
         notes.append(hint)
+    if len(shape) == 3:
+        # read slab by slab when extracted block-wise; whole, it is the same map
+        grid = RawGrid(path, dtype, tuple(shape), options.header_bytes)
+        return Volume(grid, source=str(path), notes=notes)
     return Volume.from_zyx(data, source=str(path), notes=notes)
 
 
