@@ -10,6 +10,7 @@ from pathlib import Path
 from .atomic import check_output
 from .errors import IsoconvertError, OutputError
 from .extract import extract
+from .extract.blocks import Blocks
 from .mesh import Mesh
 from .readers import ReadOptions, read_volume
 from .volume import Volume
@@ -55,6 +56,8 @@ class ConvertOptions:
         Text PLY/STL.
     force : bool
         Overwrite an existing output.
+    blocks : Blocks
+        Block-wise extraction: slab size, memory budget, Dask scheduler.
     """
 
     read: ReadOptions = field(default_factory=ReadOptions)
@@ -70,6 +73,7 @@ class ConvertOptions:
     format: str | None = None
     ascii: bool = False
     force: bool = False
+    blocks: Blocks = field(default_factory=Blocks)
 
     def updated(self, **changes) -> ConvertOptions:
         """A copy with ``changes``; names of :class:`ReadOptions` fields go to ``read``.
@@ -177,6 +181,7 @@ def convert(
         ambiguity=opts.ambiguity,
         nan_as=opts.nan_as,
         on_status=on_status,
+        blocks=opts.blocks,
         **method_options,
     )
     progress("writing")

@@ -28,6 +28,7 @@ from ..errors import IsoconvertError
 from ..mesh import Mesh
 from ..methods import EXTRACTORS, NO_DEGENERATE_OFFSET, PLUGIN_GROUP
 from ..volume import Volume
+from .blocks import BLOCK_METHODS, Blocks, extract_blocks
 from .cubes import marching_cubes
 from .prepare import count_equal, resolve_vertex_offset
 from .squares import SQUARE_AMBIGUITY_RULES, marching_squares
@@ -120,6 +121,7 @@ def extract(
     ambiguity: str | None = None,
     nan_as: float | None = None,
     on_status: Callable[[str], None] | None = None,
+    blocks: Blocks | None = None,
     **options,
 ) -> Mesh:
     """Extract the isosurface (or isocontour) of ``volume`` at ``level``.
@@ -140,6 +142,11 @@ def extract(
         Treat NaN/Inf samples as this value; None makes them an error.
     on_status : callable or None
         Receives one-line notices for the user.
+    blocks : Blocks or None
+        Block-wise extraction (:mod:`isoconvert.extract.blocks`): a slab size,
+        a memory budget, a Dask scheduler. None (or the defaults) extracts a
+        lazy volume larger than the default budget block-wise and any other
+        volume in memory; the mesh is the same either way.
     **options
         Method-specific options: ``axis`` (squares on 3D volumes),
         ``vertex_offset`` (built-ins: keep vertices this fraction of their edge
@@ -171,6 +178,23 @@ def extract(
         raise IsoconvertError(f"{name} has no option {', '.join(sorted(stray))}")
     if isinstance(level, str):
         level = resolve_level(volume, level, on_status)
+    blocks = blocks or Blocks()
+    if blocks.wanted(volume):
+        if not extractor.prepared or name not in BLOCK_METHODS:
+            raise IsoconvertError(
+                f"{name} does not run block-wise; use --method {', '.join(BLOCK_METHODS)}"
+            )
+        return extract_blocks(
+            volume,
+            float(level),
+            method=name,
+            flip=flip,
+            ambiguity=ambiguity,
+            nan_as=nan_as,
+            blocks=blocks,
+            on_status=on_status,
+            **options,
+        )
     placement_note = None
     if "vertex_offset" in extractor.options and not extractor.prepared:
         given = options.get("vertex_offset")
@@ -232,6 +256,7 @@ def resolve_level(volume: Volume, level: str, on_status: Callable[[str], None] |
 
 __all__ = [
     "AMBIGUITY_RULES",
+    "Blocks",
     "DEFAULT_AMBIGUITY",
     "EXTRACTORS",
     "NO_DEGENERATE_OFFSET",

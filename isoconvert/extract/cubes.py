@@ -15,7 +15,7 @@ import numpy as np
 
 from ..mesh import Mesh
 from ..volume import Volume
-from .placement import kernel_outputs, kernel_placement, mesh_info, reversed_orientation
+from .placement import Allocate, kernel_outputs, kernel_placement, mesh_info, reversed_orientation
 from .prepare import prepare
 from .tables import DEFAULT_AMBIGUITY, marching_cubes_table
 
@@ -113,7 +113,11 @@ class CubesBlock:
     threads: int = 1
 
     def extract(
-        self, samples: np.ndarray, scan: object, index_origin: tuple[int, int, int] = (0, 0, 0)
+        self,
+        samples: np.ndarray,
+        scan: object,
+        index_origin: tuple[int, int, int] = (0, 0, 0),
+        allocate: Allocate = kernel_outputs,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Vertices, edge ids and triangles of one block.
 
@@ -138,7 +142,7 @@ class CubesBlock:
 
         counts, table = marching_cubes_table(self.ambiguity)
         n = _native.count_cubes(samples, scan, counts, table, self.threads)
-        verts, edge_ids, tris = kernel_outputs(n.vertices, n.triangles, 3)
+        verts, edge_ids, tris = allocate(n.vertices, n.triangles, 3)
         where = kernel_placement(
             self.affine, self.origin, self.grid_shape[:2], self.offset, self.reverse, index_origin
         )

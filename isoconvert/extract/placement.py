@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from ..report import grid_from_volume
@@ -72,6 +74,11 @@ def kernel_placement(
         float(offset),
         bool(reverse),
     )
+
+
+#: ``allocate(n_vertices, n_cells, arity)`` gives a fill kernel's output arrays
+#: (:func:`kernel_outputs`, or views into a growing mesh, see blocks.py).
+Allocate = Callable[[int, int, int], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 
 def kernel_outputs(

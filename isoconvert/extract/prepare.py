@@ -50,44 +50,67 @@ def kernel_samples(
         C-contiguous, native byte order, one of the kernels' types; a view of
         ``volume.data`` when possible (no copy).
     """
+    check_volume(volume, ndim, method, nan_as)
+    return kernel_type(volume.data.T, volume.source, on_status)
+
+
+def check_volume(volume: Volume, ndim: int, method: str, nan_as: float | None = None) -> None:
+    """The checks of :func:`kernel_samples` that need no sample (shape, ``nan_as``)."""
     src = volume.source
-    data = volume.data
+    shape = volume.shape
     if nan_as is not None and not np.isfinite(nan_as):
         raise VolumeError(
             f"{src}: --nan-as takes a finite number (the value NaN/Inf samples stand for), "
             f"got {nan_as}; e.g. --nan-as 0"
         )
-    if data.ndim != ndim:
+    if len(shape) != ndim:
         hint = (
             "use --method squares for a 2D image"
-            if data.ndim == 2
+            if len(shape) == 2
             else "use --method cubes or tetra for a 3D volume"
         )
-        raise VolumeError(f"{src}: {method} needs a {ndim}D volume, got shape {data.shape}; {hint}")
-    if any(n < 2 for n in data.shape):
+        raise VolumeError(f"{src}: {method} needs a {ndim}D volume, got shape {shape}; {hint}")
+    if any(n < 2 for n in shape):
         raise VolumeError(
-            f"{src}: shape {data.shape} has a dimension below 2; an isosurface needs at least "
+            f"{src}: shape {shape} has a dimension below 2; an isosurface needs at least "
             "2 samples along every axis (for a single slice, read it as a 2D image)"
         )
-    dtype = data.dtype
+
+
+def kernel_type(
+    zyx: np.ndarray, src: str, on_status: Callable[[str], None] | None = None
+) -> np.ndarray:
+    """Samples as the kernels take them: C-contiguous, native byte order, one of
+    :data:`SUPPORTED_DTYPES` (booleans as uint8, 64-bit integers as float64 when
+    exact); a view when they already are.
+
+    Parameters
+    ----------
+    zyx : (Z, Y, X) or (Y, X) array
+        A volume's samples, or a slab of them.
+    src : str
+        The volume's source, for messages.
+    on_status : callable or None
+        Receives a line for each copy made (byte swap, non-contiguous data).
+    """
+    dtype = zyx.dtype
     if dtype == np.bool_:
-        data = data.view(np.uint8)
+        zyx = zyx.view(np.uint8)
     elif dtype.name not in SUPPORTED_DTYPES:  # the name ignores byte order
         if np.issubdtype(dtype, np.integer) and dtype.itemsize == 8:
-            data = _narrow_int64(data, src)
+            zyx = _narrow_int64(zyx, src)
         else:
             raise VolumeError(
                 f"{src}: samples of type {dtype} cannot be contoured; supported types: "
                 f"{', '.join(SUPPORTED_DTYPES)}"
             )
-    arr = data.T
-    if not arr.dtype.isnative:
+    if not zyx.dtype.isnative:
         if on_status:
-            on_status(f"{src}: converting {arr.dtype.str} samples to native byte order (a copy)")
-        arr = arr.astype(arr.dtype.newbyteorder("="), order="C")
-    if not arr.flags.c_contiguous:
-        arr = np.ascontiguousarray(arr)
-    return arr
+            on_status(f"{src}: converting {zyx.dtype.str} samples to native byte order (a copy)")
+        zyx = zyx.astype(zyx.dtype.newbyteorder("="), order="C")
+    if not zyx.flags.c_contiguous:
+        zyx = np.ascontiguousarray(zyx)
+    return zyx
 
 
 def kernel_array(

@@ -14,6 +14,7 @@ over the samples found sign changes.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -21,7 +22,7 @@ from ..errors import IsoconvertError
 from ..mesh import Mesh
 from ..methods import SQUARE_AMBIGUITY_RULES
 from ..volume import Volume
-from .placement import kernel_outputs, kernel_placement, mesh_info, reversed_orientation
+from .placement import Allocate, kernel_outputs, kernel_placement, mesh_info, reversed_orientation
 from .prepare import prepare
 from .tables import DEFAULT_AMBIGUITY, marching_squares_table
 
@@ -80,8 +81,6 @@ def marching_squares(
         increasing x: the order follows from the grid alone, whatever the
         number of threads.
     """
-    from .. import _native
-
     if ambiguity not in SQUARE_AMBIGUITY_RULES:
         raise IsoconvertError(
             f"unknown ambiguity rule {ambiguity!r} for squares; "
@@ -99,36 +98,82 @@ def marching_squares(
         vertex_offset=vertex_offset,
         on_status=on_status,
     )
-    a = 2 if planar else _AXES[axis]
-    f = prep.volume3
-    counts, segments = _square_tables()
-    n = _native.count_squares(f, prep.scan, a, counts, segments, prep.threads)
-    if n.segments == 0:
+    affine, origin = _placement3(volume)
+    block = SquaresBlock(
+        affine=affine,
+        origin=origin,
+        grid_shape=volume.shape if not planar else (*volume.shape, 1),
+        axis="z" if planar else axis,
+        planar=planar,
+        offset=prep.offset,
+        ambiguity=ambiguity,
+        reverse=reversed_orientation(volume, flip),
+        threads=prep.threads,
+    )
+    verts, edge_ids, segs = block.extract(prep.volume3, prep.scan)
+    if len(segs) == 0:
         raise IsoconvertError(f"{volume.source}: no slice crosses level {prep.level:g}")
-    verts, edge_ids, segs = kernel_outputs(n.vertices, n.segments, 2)
-    where = kernel_placement(
-        *_placement3(volume),
-        (f.shape[2], f.shape[1]),
-        prep.offset,
-        reversed_orientation(volume, flip),
-    )
-    rule = SQUARE_AMBIGUITY_RULES.index(ambiguity)  # as SquareRule in src/squares.hpp
-    _native.fill_squares(
-        f,
-        prep.scan,
-        n,
-        a,
-        counts,
-        segments,
-        rule,
-        planar,
-        *where,
-        prep.threads,
-        verts,
-        edge_ids,
-        segs,
-    )
     return Mesh(verts, segs, edge_ids, mesh_info(volume, "squares", prep.level, flip, prep.offset))
+
+
+@dataclass(frozen=True)
+class SquaresBlock:
+    """Marching Squares on every slice of one block of a grid.
+
+    As :class:`~isoconvert.extract.cubes.CubesBlock`, plus ``axis`` (the axis
+    the slices are across) and ``planar`` (a 2D image, given as one slice;
+    its ids are then ``2 * (i + X * j) + axis``). The ambiguity rules are
+    :data:`SQUARE_AMBIGUITY_RULES`. ``affine`` is ``(3, 3)`` and ``origin``
+    ``(3,)`` also for images (their plane is z = 0).
+    """
+
+    affine: np.ndarray
+    origin: np.ndarray
+    grid_shape: tuple[int, int, int]
+    axis: str = "z"
+    planar: bool = False
+    offset: float = 0.0
+    ambiguity: str = DEFAULT_AMBIGUITY
+    reverse: bool = False
+    threads: int = 1
+
+    def extract(
+        self,
+        samples: np.ndarray,
+        scan: object,
+        index_origin: tuple[int, int, int] = (0, 0, 0),
+        allocate: Allocate = kernel_outputs,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Vertices ``(V, 3) float64``, edge ids ``(V,) int64`` and segments
+        ``(C, 2) int64`` (indices into this block's vertices) of one block of
+        ``(Z, Y, X)`` samples; see :meth:`CubesBlock.extract
+        <isoconvert.extract.cubes.CubesBlock.extract>`."""
+        from .. import _native
+
+        a = _AXES[self.axis]
+        counts, segments = _square_tables()
+        n = _native.count_squares(samples, scan, a, counts, segments, self.threads)
+        verts, edge_ids, segs = allocate(n.vertices, n.segments, 2)
+        where = kernel_placement(
+            self.affine, self.origin, self.grid_shape[:2], self.offset, self.reverse, index_origin
+        )
+        rule = SQUARE_AMBIGUITY_RULES.index(self.ambiguity)  # as SquareRule in src/squares.hpp
+        _native.fill_squares(
+            samples,
+            scan,
+            n,
+            a,
+            counts,
+            segments,
+            rule,
+            self.planar,
+            *where,
+            self.threads,
+            verts,
+            edge_ids,
+            segs,
+        )
+        return verts, edge_ids, segs
 
 
 def _square_tables() -> tuple[np.ndarray, np.ndarray]:

@@ -9,11 +9,14 @@ over the samples, bounds the work of the counting and filling passes.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
 
 from ..errors import IsoconvertError
 from ..mesh import Mesh
 from ..volume import Volume
-from .placement import kernel_outputs, kernel_placement, mesh_info, reversed_orientation
+from .placement import Allocate, kernel_outputs, kernel_placement, mesh_info, reversed_orientation
 from .prepare import prepare
 from .tables import (
     CUBE_TETRAHEDRA,
@@ -55,24 +58,64 @@ def marching_tetrahedra(
         tetrahedron: the order follows from the grid alone, whatever the
         number of threads.
     """
-    from .. import _native
-
     if ambiguity != DEFAULT_AMBIGUITY:
         raise IsoconvertError("tetra has no ambiguous configurations; drop --ambiguity")
     prep = prepare(
         volume, 3, "tetra", level, nan_as=nan_as, vertex_offset=vertex_offset, on_status=on_status
     )
-    counts, triangles = marching_tetrahedra_table()
-    tables = (TETRA_DIRECTIONS, CUBE_TETRAHEDRA, counts, triangles, TETRA_EDGE_BASE, TETRA_EDGE_DIR)
-    f = prep.array
-    n = _native.count_tetra(f, prep.scan, *tables, prep.threads)
-    verts, edge_ids, tris = kernel_outputs(n.vertices, n.triangles, 3)
-    where = kernel_placement(
-        volume.affine,
-        volume.origin,
-        (f.shape[2], f.shape[1]),
-        prep.offset,
-        reversed_orientation(volume, flip),
+    block = TetraBlock(
+        affine=volume.affine,
+        origin=volume.origin,
+        grid_shape=volume.shape,
+        offset=prep.offset,
+        reverse=reversed_orientation(volume, flip),
+        threads=prep.threads,
     )
-    _native.fill_tetra(f, prep.scan, n, *tables, *where, prep.threads, verts, edge_ids, tris)
+    verts, edge_ids, tris = block.extract(prep.array, prep.scan)
     return Mesh(verts, tris, edge_ids, mesh_info(volume, "tetra", prep.level, flip, prep.offset))
+
+
+@dataclass(frozen=True)
+class TetraBlock:
+    """Marching Tetrahedra on one block of a grid, with global positions and edge ids.
+
+    As :class:`~isoconvert.extract.cubes.CubesBlock` (same attributes but
+    ``ambiguity``, which tetrahedra do not have); edge ids are
+    ``7 * (i + X * (j + Y * k)) + direction`` in the whole grid.
+    """
+
+    affine: np.ndarray
+    origin: np.ndarray
+    grid_shape: tuple[int, int, int]
+    offset: float = 0.0
+    reverse: bool = False
+    threads: int = 1
+
+    def extract(
+        self,
+        samples: np.ndarray,
+        scan: object,
+        index_origin: tuple[int, int, int] = (0, 0, 0),
+        allocate: Allocate = kernel_outputs,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Vertices ``(V, 3) float64``, edge ids ``(V,) int64`` and triangles
+        ``(C, 3) int64`` (indices into this block's vertices) of one block; see
+        :meth:`CubesBlock.extract <isoconvert.extract.cubes.CubesBlock.extract>`."""
+        from .. import _native
+
+        counts, triangles = marching_tetrahedra_table()
+        tables = (
+            TETRA_DIRECTIONS,
+            CUBE_TETRAHEDRA,
+            counts,
+            triangles,
+            TETRA_EDGE_BASE,
+            TETRA_EDGE_DIR,
+        )
+        n = _native.count_tetra(samples, scan, *tables, self.threads)
+        verts, edge_ids, tris = allocate(n.vertices, n.triangles, 3)
+        where = kernel_placement(
+            self.affine, self.origin, self.grid_shape[:2], self.offset, self.reverse, index_origin
+        )
+        _native.fill_tetra(samples, scan, n, *tables, *where, self.threads, verts, edge_ids, tris)
+        return verts, edge_ids, tris

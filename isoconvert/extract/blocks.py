@@ -1,0 +1,644 @@
+"""Block-wise extraction: a volume cut into z-slabs, stitched by edge id.
+
+A slab owns the z-layers ``k0 <= k < k1`` and is read with one more layer
+(``k1``, its overlap) so that the cubes between its last owned layer and the
+next slab exist. It owns every vertex whose edge starts on one of its layers
+and every cell whose lowest row of samples is one of its layers, so each
+vertex and cell of the whole mesh is made by exactly one slab. The vertices
+of the overlap layer belong to the next slab, which makes them first: a
+slab's cells that use them are renumbered once the next slab's vertices are
+known, by their edge id (ARCHITECTURE.md, Vertex identity), never by position.
+
+The kernels number vertices row of samples by row (``j + Y * k``) and cells by
+the row of their lowest samples, so the slabs' vertices and cells, taken in z
+order, are the whole mesh's in the whole mesh's order: block-wise extraction
+gives the in-memory mesh bit for bit, whatever the slab thickness.
+
+The same :func:`run_block` runs on local threads and as a Dask task
+(:mod:`isoconvert.distributed`); :func:`stitch_blocks` merges results in
+either case.
+"""
+
+from __future__ import annotations
+
+import mmap
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..errors import IsoconvertError, VolumeError
+from ..grid import LazyGrid, grid_slab_zyx
+from ..mesh import Mesh
+from ..methods import NO_DEGENERATE_OFFSET
+from ..threads import kernel_threads
+from ..volume import ValueRange, Volume
+from .placement import Allocate, kernel_outputs, mesh_info, reversed_orientation
+from .prepare import (
+    _replace_nonfinite,
+    check_level,
+    check_vertex_offset,
+    check_volume,
+    equal_target,
+    kernel_type,
+    resolve_vertex_offset,
+)
+from .tables import DEFAULT_AMBIGUITY
+
+#: Methods that run block-wise, and how many edge directions number their ids.
+BLOCK_METHODS = {"cubes": 3, "tetra": 7, "squares": 3}
+
+#: The default memory budget for samples in flight (``--max-memory``): a lazy
+#: volume larger than this is extracted block-wise.
+DEFAULT_MAX_MEMORY = 1 << 30
+
+#: Copies of a slab alive at once: the one being extracted, its kernel-type or
+#: NaN-free copy, and the next one being read.
+_SLAB_COPIES = 3
+
+
+@dataclass(frozen=True)
+class Blocks:
+    """How to cut a volume into blocks, and where to run them.
+
+    Attributes
+    ----------
+    size : int or None
+        z-layers each block owns (it reads one more); None chooses from
+        ``max_memory``.
+    max_memory : int or None
+        Bytes of samples held at once; None is :data:`DEFAULT_MAX_MEMORY`.
+        A lazy volume larger than this is extracted block-wise.
+    scheduler : str or None
+        A Dask scheduler address (``tcp://host:8786``) to run the blocks on;
+        None runs them here.
+    """
+
+    size: int | None = None
+    max_memory: int | None = None
+    scheduler: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.size is not None and self.size < 1:
+            raise IsoconvertError(f"--block-size must be at least 1 layer, got {self.size}")
+        if self.max_memory is not None and self.max_memory <= 0:
+            raise IsoconvertError(f"--max-memory must be positive, got {self.max_memory}")
+
+    @property
+    def budget(self) -> int:
+        return self.max_memory or DEFAULT_MAX_MEMORY
+
+    def wanted(self, volume: Volume) -> bool:
+        """Whether ``volume`` is to be extracted block-wise: asked for (a size or
+        a scheduler), or a lazy volume larger than the memory budget."""
+        if volume.ndim != 3:
+            if self.size is not None or self.scheduler is not None:
+                raise IsoconvertError(
+                    f"{volume.source}: a 2D image is contoured in memory; "
+                    "drop --block-size and --scheduler"
+                )
+            return False
+        if self.size is not None or self.scheduler is not None:
+            return True
+        return volume.grid is not None and volume.grid.nbytes > self.budget
+
+    def layers(self, shape: tuple[int, int, int], itemsize: int) -> int:
+        """z-layers per block: :attr:`size`, or what fits the budget."""
+        if self.size is not None:
+            return self.size
+        layer = shape[0] * shape[1] * max(itemsize, 1) * _SLAB_COPIES
+        return max(1, self.budget // layer)
+
+
+def slab_ranges(nz: int, layers: int) -> list[tuple[int, int]]:
+    """Owned z-ranges ``[k0, k1)`` of ``layers`` layers covering ``0 <= k < nz``.
+
+    Every slab but the last reads layer ``k1`` too; the last owns the grid's
+    last layer and reads nothing more, so it is given at least two layers (a
+    lone last layer joins the slab before it).
+    """
+    cuts = list(range(0, nz, max(1, layers))) + [nz]
+    if len(cuts) > 2 and cuts[-1] - cuts[-2] < 2:
+        del cuts[-2]
+    return list(zip(cuts[:-1], cuts[1:], strict=True))
+
+
+@dataclass(frozen=True)
+class BlockJob:
+    """Everything a worker needs to extract one slab, besides its samples.
+
+    Attributes
+    ----------
+    method : str
+        ``cubes``, ``tetra`` or ``squares``.
+    level : float
+    k0, k1 : int
+        Owned layers ``k0 <= k < k1``; samples ``k0 .. min(k1, Z - 1)`` are read.
+    offset : float
+        Vertex offset.
+    ambiguity : str
+    axis : str
+        squares: the axis the slices are across.
+    reverse : bool
+        Cells in reverse orientation.
+    nan_as : float or None
+    affine : (3, 3) float64
+    origin : (3,) float64
+    grid_shape : (3,) int
+        (X, Y, Z) of the whole grid.
+    threads : int
+        Kernel threads.
+    source : str
+        For messages.
+    """
+
+    method: str
+    level: float
+    k0: int
+    k1: int
+    offset: float
+    ambiguity: str
+    axis: str
+    reverse: bool
+    nan_as: float | None
+    affine: np.ndarray
+    origin: np.ndarray
+    grid_shape: tuple[int, int, int]
+    threads: int
+    source: str
+
+    @property
+    def last(self) -> bool:
+        return self.k1 >= self.grid_shape[2]
+
+    @property
+    def read_range(self) -> tuple[int, int]:
+        """Layers to read, ``[k0, k1 + 1)`` but for the last slab."""
+        return self.k0, self.k1 if self.last else self.k1 + 1
+
+
+@dataclass
+class BlockResult:
+    """One slab's vertices and cells, numbered within the slab.
+
+    Attributes
+    ----------
+    k0 : int
+        The slab's first layer.
+    vertices : (V, 3) float64 or None
+        World positions; None when the kernel wrote them straight into the
+        mesh being built (:meth:`MeshSink.allocate`), as do the next two.
+    edge_ids : (V,) int64 or None
+        Global edge ids.
+    cells : (C, 3) or (C, 2) int64 or None
+        Indices into the slab's vertices; the first ``owned_cells`` are the slab's.
+    owned_vertices : int
+        The first ``owned_vertices`` vertices are the slab's; the others lie on
+        its overlap layer and are the next slab's.
+    owned_cells : int
+    first_ids : (F,) int64
+        Edge ids of the vertices on layer ``k0`` (the first ones): the slab
+        before finds its overlap vertices among them.
+    overlap_ids : (V - owned_vertices,) int64
+        Edge ids of the overlap vertices.
+    min, max : float
+        Range of the slab's samples (after NaN replacement).
+    equal : int
+        Owned samples equal to the level.
+    """
+
+    k0: int
+    vertices: np.ndarray | None
+    edge_ids: np.ndarray | None
+    cells: np.ndarray | None
+    owned_vertices: int
+    owned_cells: int
+    first_ids: np.ndarray
+    overlap_ids: np.ndarray
+    min: float
+    max: float
+    equal: int
+
+
+def read_block(source: np.ndarray | LazyGrid, job: BlockJob) -> np.ndarray:
+    """The samples of ``job``'s slab, ``(layers, Y, X)``, from an (X, Y, Z)
+    array or a lazy grid."""
+    lo, hi = job.read_range
+    return grid_slab_zyx(source, lo, hi)
+
+
+def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) -> BlockResult:
+    """Extract one slab: the kernels' first pass and count-and-fill on its samples.
+
+    Parameters
+    ----------
+    job : BlockJob
+    zyx : (layers, Y, X) array
+        :func:`read_block` of ``job``.
+    allocate : callable or None
+        Where the kernel writes (:meth:`MeshSink.allocate`); the result then
+        holds no arrays but the ids it needs. None: fresh arrays, kept in the
+        result (a Dask task sends them back).
+
+    Raises
+    ------
+    VolumeError
+        NaN/Inf samples and no ``nan_as``; unsupported sample type.
+    """
+    from .. import _native
+
+    zyx = kernel_type(zyx, job.source)
+    equal_to = equal_target(zyx.dtype, job.level)
+
+    def scan(samples: np.ndarray):
+        return _native.scan_rows(
+            samples, job.level, equal_to is not None, equal_to or 0.0, job.threads
+        )
+
+    rows = scan(zyx)
+    if rows.nonfinite:
+        if job.nan_as is None:
+            lo, hi = job.read_range
+            raise VolumeError(
+                f"{job.source}: {rows.nonfinite} samples of z-layers {lo}..{hi - 1} are NaN or "
+                "infinite; pass --nan-as VALUE to treat them as that value"
+            )
+        zyx = _replace_nonfinite(zyx, rows.nonfinite, job.nan_as, job.source)
+        rows = scan(zyx)
+    equal = rows.equal
+    if equal and not job.last:  # the overlap layer's samples are the next slab's
+        equal -= int(np.count_nonzero(zyx[-1] == zyx.dtype.type(equal_to)))
+    verts, ids, cells = _block_kernel(job).extract(
+        zyx, rows, (0, 0, job.k0), allocate or kernel_outputs
+    )
+    per_layer = BLOCK_METHODS[job.method] * job.grid_shape[0] * job.grid_shape[1]
+    layer = ids // per_layer  # non-decreasing: vertices come row by row
+    owned = len(ids) if job.last else int(np.searchsorted(layer, job.k1))
+    owned_cells = len(cells)
+    if job.method == "squares" and job.axis == "z" and not job.last and len(cells):
+        # slices across z are the only cells on the overlap layer; all their
+        # vertices lie on it, and they come last
+        owned_cells = int(np.searchsorted(cells[:, 0] >= owned, True))
+    kept = allocate is None
+    return BlockResult(
+        k0=job.k0,
+        vertices=verts if kept else None,
+        edge_ids=ids if kept else None,
+        cells=cells if kept else None,
+        owned_vertices=owned,
+        owned_cells=owned_cells,
+        first_ids=ids[: int(np.searchsorted(layer, job.k0 + 1))].copy(),
+        overlap_ids=ids[owned:].copy(),
+        min=float(rows.min),
+        max=float(rows.max),
+        equal=int(equal),
+    )
+
+
+def _block_kernel(job: BlockJob):
+    """The method's block extractor for ``job``."""
+    common = {
+        "affine": job.affine,
+        "origin": job.origin,
+        "grid_shape": job.grid_shape,
+        "offset": job.offset,
+        "reverse": job.reverse,
+        "threads": job.threads,
+    }
+    if job.method == "cubes":
+        from .cubes import CubesBlock
+
+        return CubesBlock(ambiguity=job.ambiguity, **common)
+    if job.method == "tetra":
+        from .tetra import TetraBlock
+
+        return TetraBlock(**common)
+    from .squares import SquaresBlock
+
+    return SquaresBlock(axis=job.axis, ambiguity=job.ambiguity, **common)
+
+
+class _Growing:
+    """An array that grows along its first axis without copying what it holds.
+
+    It lives in an anonymous memory map, which grows by remapping its pages
+    (``mmap.resize``), not by copying them, and whose new pages cost nothing
+    until written. Views from :meth:`view` must be dropped before the next
+    :meth:`reserve` (a map with views cannot move).
+    """
+
+    def __init__(self, width: tuple[int, ...], dtype) -> None:
+        self.width = width
+        self.dtype = np.dtype(dtype)
+        self.row = self.dtype.itemsize * int(np.prod(width, dtype=np.int64))
+        self.size = 0  # rows committed
+        self._map = mmap.mmap(-1, 1 << 16, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+
+    def reserve(self, rows: int) -> None:
+        """Room for ``rows`` more rows after the committed ones."""
+        need = (self.size + rows) * self.row
+        if need > len(self._map):
+            self._map.resize(max(need, 2 * len(self._map)))
+            if hasattr(mmap, "MADV_HUGEPAGE"):
+                self._map.madvise(mmap.MADV_HUGEPAGE)
+
+    def view(self, start: int, stop: int) -> np.ndarray:
+        """Rows ``start <= r < stop`` (reserved or committed), writable."""
+        count = (stop - start) * int(np.prod(self.width, dtype=np.int64))
+        flat = np.frombuffer(self._map, dtype=self.dtype, count=count, offset=start * self.row)
+        return flat.reshape(stop - start, *self.width)
+
+    def final(self) -> np.ndarray:
+        """The committed rows; the map is then the array's."""
+        if self.size == 0:
+            return np.empty((0, *self.width), dtype=self.dtype)
+        self._map.resize(self.size * self.row)
+        out = self.view(0, self.size)
+        self._map = None
+        return out
+
+
+class MeshSink:
+    """The mesh being stitched (see :func:`stitch_blocks`), in memory.
+
+    A local slab's kernel writes straight into it (:meth:`allocate`); a
+    remote slab's arrays are copied in (:meth:`put`).
+    """
+
+    def __init__(self, arity: int = 3) -> None:
+        self._vertices = _Growing((3,), np.float64)
+        self._ids = _Growing((), np.int64)
+        self._cells = _Growing((arity,), np.int64)
+
+    @property
+    def counts(self) -> tuple[int, int]:
+        """Vertices and cells committed."""
+        return self._vertices.size, self._cells.size
+
+    def allocate(
+        self, n_vertices: int, n_cells: int, arity: int
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Arrays for a slab's kernel, after what is committed; valid until the
+        next call (see :class:`_Growing`)."""
+        out = []
+        for part, n in (
+            (self._vertices, n_vertices),
+            (self._ids, n_vertices),
+            (self._cells, n_cells),
+        ):
+            part.reserve(n)
+            out.append(part.view(part.size, part.size + n))
+        return tuple(out)
+
+    def put(self, result: BlockResult) -> None:
+        """Copy a slab's arrays in, where :meth:`allocate` would have put them."""
+        verts, ids, cells = self.allocate(len(result.vertices), len(result.cells), 0)
+        verts[:] = result.vertices
+        ids[:] = result.edge_ids
+        cells[:] = result.cells
+
+    def commit(self, n_vertices: int, n_cells: int) -> None:
+        """Keep the first ``n_vertices`` and ``n_cells`` of the last slab's."""
+        self._vertices.size += n_vertices
+        self._ids.size += n_vertices
+        self._cells.size += n_cells
+
+    def renumber(self, start: int, stop: int, number: np.ndarray) -> None:
+        """Replace committed cells ``start .. stop - 1`` (slab-local) by ``number`` of them."""
+        step = 1 << 16  # small pieces: the temporary stays in cache
+        for a in range(start, stop, step):
+            piece = self._cells.view(a, min(a + step, stop))
+            piece[:] = number[piece]
+            del piece
+
+    def mesh(self, info: dict) -> Mesh:
+        return Mesh(self._vertices.final(), self._cells.final(), self._ids.final(), info)
+
+
+@dataclass
+class _Pending:
+    """A stitched slab whose cells wait for the next slab's first layer."""
+
+    vertex_start: int
+    owned_vertices: int
+    overlap_ids: np.ndarray
+    cell_start: int
+    owned_cells: int
+
+
+def stitch_blocks(results: Iterable[BlockResult], sink: MeshSink) -> None:
+    """Merge slab results, given in z order, into one numbering in ``sink``:
+    each slab's own vertices as it arrives, its cells renumbered once the next
+    slab's first-layer vertices (its overlap vertices) are known.
+
+    Raises
+    ------
+    IsoconvertError
+        When a slab's overlap vertices are not the next slab's first-layer
+        vertices (slabs out of order or extracted differently): a bug, never a
+        weld.
+    """
+    pending: _Pending | None = None
+    for result in results:
+        if result.vertices is not None:
+            sink.put(result)
+        vertex_start, cell_start = sink.counts
+        if pending is not None:
+            _renumber(sink, pending, result.first_ids, vertex_start)
+        sink.commit(result.owned_vertices, result.owned_cells)
+        pending = _Pending(
+            vertex_start,
+            result.owned_vertices,
+            result.overlap_ids,
+            cell_start,
+            result.owned_cells,
+        )
+        del result  # a local result may hold views of the sink
+    if pending is not None:
+        _renumber(sink, pending, np.empty(0, dtype=np.int64), sink.counts[0])
+
+
+def _renumber(sink: MeshSink, block: _Pending, following: np.ndarray, following_start: int) -> None:
+    """Give ``block``'s cells global numbers; its overlap vertices are found
+    among the following slab's first-layer vertices by edge id."""
+    own = block.owned_vertices
+    shared = block.overlap_ids
+    number = np.empty(own + len(shared), dtype=np.int64)
+    number[:own] = np.arange(block.vertex_start, block.vertex_start + own)
+    if len(shared):
+        if len(following) < len(shared):
+            raise IsoconvertError("internal error: a slab's overlap vertices have no owner")
+        order = np.argsort(following, kind="stable")
+        at = order[np.minimum(np.searchsorted(following, shared, sorter=order), len(following) - 1)]
+        if not np.array_equal(following[at], shared):
+            raise IsoconvertError("internal error: a slab's overlap vertices have no owner")
+        number[own:] = following_start + at
+    sink.renumber(block.cell_start, block.cell_start + block.owned_cells, number)
+
+
+def run_local(
+    source: np.ndarray | LazyGrid, jobs: list[BlockJob], allocate: Allocate | None = None
+) -> Iterator[BlockResult]:
+    """Run ``jobs`` here, in order, reading the next slab while one is extracted."""
+    if not jobs:
+        return
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="isoconvert-read") as reader:
+        ahead = reader.submit(read_block, source, jobs[0])
+        for i, job in enumerate(jobs):
+            zyx = ahead.result()
+            ahead = reader.submit(read_block, source, jobs[i + 1]) if i + 1 < len(jobs) else None
+            result = run_block(job, zyx, allocate)
+            del zyx
+            yield result
+
+
+Runner = Callable[[list[BlockJob]], Iterator[BlockResult]]
+
+
+def extract_blocks(
+    volume: Volume,
+    level: float,
+    *,
+    method: str = "cubes",
+    flip: bool = False,
+    ambiguity: str = DEFAULT_AMBIGUITY,
+    nan_as: float | None = None,
+    vertex_offset: float | None = None,
+    axis: str = "z",
+    blocks: Blocks | None = None,
+    on_status: Callable[[str], None] | None = None,
+    sink: MeshSink | None = None,
+) -> Mesh:
+    """Extract the isosurface of a 3D volume slab by slab; the same mesh as the
+    in-memory path (:func:`isoconvert.extract`), bit for bit.
+
+    The samples are read one slab at a time (from ``volume.grid`` when the
+    volume is lazy), so memory holds a few slabs and the mesh, not the volume.
+    Validation that needs every sample (level inside the data range) happens
+    when the last slab is done; a NaN without ``nan_as`` stops at its slab.
+    When the vertex offset is left to choose and a slab finds a sample equal
+    to the level, the extraction starts again with the offset (the mesh must
+    not depend on where that sample lies).
+
+    Parameters
+    ----------
+    volume : Volume
+        3D.
+    level : float
+    method : str
+        ``cubes``, ``tetra`` or ``squares`` (slices across ``axis``).
+    flip, ambiguity, nan_as, vertex_offset, axis, on_status
+        As for :func:`isoconvert.extract`.
+    blocks : Blocks or None
+        Slab size, memory budget, and a Dask scheduler to run on.
+    sink : MeshSink or None
+        Receives the stitched pieces; None keeps them in memory.
+
+    Returns
+    -------
+    Mesh
+        With ``info["blocks"]`` the number of slabs.
+    """
+    if method not in BLOCK_METHODS:
+        raise IsoconvertError(
+            f"{method} does not run block-wise; use --method {', '.join(BLOCK_METHODS)}"
+        )
+    blocks = blocks or Blocks()
+    check_volume(volume, 3, method, nan_as)
+    level = float(level)
+    if not np.isfinite(level):
+        check_level(level, ValueRange(0.0, 0.0, 0), volume.source)
+    source = volume.samples
+    dtype = kernel_type(np.empty((0, 0, 0), dtype=volume.dtype), volume.source).dtype
+    layers = blocks.layers(volume.shape, dtype.itemsize)
+    ranges = slab_ranges(volume.shape[2], layers)
+    can_equal = equal_target(dtype, level) is not None
+    auto = vertex_offset is None
+    offset = 0.0 if auto or vertex_offset == 0 else check_vertex_offset(vertex_offset)
+    arity = 2 if method == "squares" else 3
+    if blocks.scheduler is not None:
+        from ..distributed import dask_runner
+
+        runner: Runner | None = dask_runner(blocks.scheduler, source, volume.source)
+    else:
+        runner = None
+    threads = kernel_threads()
+    while True:
+        template = BlockJob(
+            method=method,
+            level=level,
+            k0=0,
+            k1=0,
+            offset=offset,
+            ambiguity=ambiguity,
+            axis=axis,
+            reverse=reversed_orientation(volume, flip),
+            nan_as=nan_as,
+            affine=np.ascontiguousarray(volume.affine, dtype=np.float64),
+            origin=np.ascontiguousarray(volume.origin, dtype=np.float64),
+            grid_shape=tuple(int(n) for n in volume.shape),
+            threads=threads,
+            source=volume.source,
+        )
+        jobs = [replace(template, k0=k0, k1=k1) for k0, k1 in ranges]
+        out = sink or MeshSink(arity)
+        stats = _Stats()
+        results = runner(jobs) if runner else run_local(source, jobs, out.allocate)
+        stop = auto and can_equal and not offset
+        try:
+            stitch_blocks(stats.tally(results, stop_on_equal=stop), out)
+        except _Restart:
+            offset = NO_DEGENERATE_OFFSET
+            continue
+        finally:
+            results.close()
+        break
+    check_level(level, ValueRange(stats.min, stats.max, 0), volume.source)
+    _, note = resolve_vertex_offset(dtype, level, vertex_offset, stats.equal)
+    info = mesh_info(volume, method, level, flip, offset)
+    info["blocks"] = len(ranges)
+    mesh = out.mesh(info)
+    if method == "squares" and mesh.n_cells == 0:
+        raise IsoconvertError(f"{volume.source}: no slice crosses level {level:g}")
+    if note and on_status:
+        on_status(note)
+    return mesh
+
+
+class _Restart(Exception):
+    """A slab found a sample equal to the level while the offset was still 0."""
+
+
+class _Stats:
+    """Range and equal count over the slabs seen."""
+
+    def __init__(self) -> None:
+        self.min, self.max, self.equal = np.inf, -np.inf, 0
+
+    def tally(self, results: Iterator[BlockResult], stop_on_equal: bool) -> Iterator[BlockResult]:
+        """Pass ``results`` on, counting; with ``stop_on_equal``, raise
+        :class:`_Restart` at the first slab with a sample equal to the level."""
+        for result in results:
+            self.min = min(self.min, result.min)
+            self.max = max(self.max, result.max)
+            self.equal += result.equal
+            if stop_on_equal and self.equal:
+                raise _Restart
+            yield result
+
+
+__all__ = [
+    "BLOCK_METHODS",
+    "DEFAULT_MAX_MEMORY",
+    "BlockJob",
+    "BlockResult",
+    "Blocks",
+    "MeshSink",
+    "extract_blocks",
+    "read_block",
+    "run_block",
+    "run_local",
+    "slab_ranges",
+    "stitch_blocks",
+]
