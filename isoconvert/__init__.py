@@ -1,4 +1,4 @@
-"""isoconvert: scalar volumes (raw, NRRD, TIFF) to isosurface meshes (OBJ, PLY, STL).
+"""isoconvert: scalar volumes (raw, NRRD, TIFF, Zarr) to isosurface meshes (OBJ, PLY, STL).
 
 The command line (``isoconvert``) is a thin shell over these functions.
 
@@ -18,6 +18,7 @@ __version__ = "0.1.0"
 
 #: Public name -> the module that defines it (relative to this package).
 _PUBLIC = {
+    "Blocks": ".extract.blocks",
     "ConvertOptions": ".convert",
     "ConvertResult": ".convert",
     "convert": ".convert",
@@ -36,6 +37,7 @@ _PUBLIC = {
 
 if TYPE_CHECKING:
     from .convert import ConvertOptions, ConvertResult, convert
+    from .extract.blocks import Blocks
     from .errors import IsoconvertError
     from .extract import EXTRACTORS, extract
     from .mesh import Mesh
@@ -79,6 +81,7 @@ __all__ = [
     "EXTRACTORS",
     "READERS",
     "WRITERS",
+    "Blocks",
     "ConvertOptions",
     "ConvertResult",
     "IsoconvertError",

@@ -173,6 +173,10 @@ def convert(
     if opts.vertex_offset is not None:
         method_options["vertex_offset"] = opts.vertex_offset
     progress("extracting")
+    blocks = opts.blocks
+    if writer.streams and blocks.spill_dir is None:
+        # a block-wise mesh larger than the budget waits for the writer on disk
+        blocks = replace(blocks, spill_dir=Path(output).resolve().parent)
     mesh = extract(
         volume,
         level,
@@ -181,7 +185,7 @@ def convert(
         ambiguity=opts.ambiguity,
         nan_as=opts.nan_as,
         on_status=on_status,
-        blocks=opts.blocks,
+        blocks=blocks,
         **method_options,
     )
     progress("writing")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import mmap
 import os
 
 from .errors import VolumeError
@@ -31,3 +32,12 @@ def check_fits(n_bytes: int, what: str, source: str) -> None:
             f"{available / 2**30:.1f} GiB of memory available; check the header, or use a "
             "machine with more memory"
         )
+
+
+class FileMap(mmap.mmap):
+    """A shared memory map of a temporary file (a mesh that outgrew memory).
+
+    Its pages are the file's: giving them back (``madvise(MADV_DONTNEED)``, see
+    :func:`isoconvert.writers.chunks.row_chunks`) loses nothing, whereas on an
+    anonymous map it would erase them. Only maps of this type are released.
+    """

@@ -22,14 +22,17 @@ either case.
 from __future__ import annotations
 
 import mmap
+import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
 from ..errors import IsoconvertError, VolumeError
 from ..grid import LazyGrid, grid_slab_zyx
+from ..memory import FileMap
 from ..mesh import Mesh
 from ..methods import NO_DEGENERATE_OFFSET
 from ..threads import kernel_threads
@@ -54,7 +57,8 @@ BLOCK_METHODS = {"cubes": 3, "tetra": 7, "squares": 3}
 DEFAULT_MAX_MEMORY = 1 << 30
 
 #: Copies of a slab alive at once: the one being extracted, its kernel-type or
-#: NaN-free copy, and the next one being read.
+#: NaN-free copy, and the next one being read. Slabs get half the budget;
+#: the mesh, a quarter before it moves to disk (when it may).
 _SLAB_COPIES = 3
 
 
@@ -68,16 +72,25 @@ class Blocks:
         z-layers each block owns (it reads one more); None chooses from
         ``max_memory``.
     max_memory : int or None
-        Bytes of samples held at once; None is :data:`DEFAULT_MAX_MEMORY`.
-        A lazy volume larger than this is extracted block-wise.
+        Bytes that block-wise extraction may hold at once, beyond the
+        program itself: slabs of samples take half, the mesh being built a
+        quarter before it moves to ``spill_dir`` (when there is one). None is
+        :data:`DEFAULT_MAX_MEMORY`. A lazy volume larger than this is
+        extracted block-wise.
     scheduler : str or None
         A Dask scheduler address (``tcp://host:8786``) to run the blocks on;
         None runs them here.
+    spill_dir : Path or None
+        Where the mesh being built moves (into nameless temporary files) once
+        it is larger than ``max_memory``; None keeps it in memory. A writer
+        then streams it to its file (:func:`isoconvert.convert` sets the
+        output's folder).
     """
 
     size: int | None = None
     max_memory: int | None = None
     scheduler: str | None = None
+    spill_dir: Path | None = None
 
     def __post_init__(self) -> None:
         if self.size is not None and self.size < 1:
@@ -108,7 +121,7 @@ class Blocks:
         if self.size is not None:
             return self.size
         layer = shape[0] * shape[1] * max(itemsize, 1) * _SLAB_COPIES
-        return max(1, self.budget // layer)
+        return max(1, self.budget // 2 // layer)
 
 
 def slab_ranges(nz: int, layers: int) -> list[tuple[int, int]]:
@@ -322,10 +335,12 @@ def _block_kernel(job: BlockJob):
 class _Growing:
     """An array that grows along its first axis without copying what it holds.
 
-    It lives in an anonymous memory map, which grows by remapping its pages
+    It lives in a memory map, which grows by remapping its pages
     (``mmap.resize``), not by copying them, and whose new pages cost nothing
-    until written. Views from :meth:`view` must be dropped before the next
-    :meth:`reserve` (a map with views cannot move).
+    until written: anonymous memory at first, a temporary file once
+    :meth:`spill` is called (the file has no name, so nothing is left behind
+    whatever happens). Views from :meth:`view` must be dropped before the
+    next :meth:`reserve` (a map with views cannot move).
     """
 
     def __init__(self, width: tuple[int, ...], dtype) -> None:
@@ -334,14 +349,43 @@ class _Growing:
         self.row = self.dtype.itemsize * int(np.prod(width, dtype=np.int64))
         self.size = 0  # rows committed
         self._map = mmap.mmap(-1, 1 << 16, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+        self._file = None
+
+    @property
+    def nbytes(self) -> int:
+        return len(self._map)
 
     def reserve(self, rows: int) -> None:
         """Room for ``rows`` more rows after the committed ones."""
         need = (self.size + rows) * self.row
         if need > len(self._map):
             self._map.resize(max(need, 2 * len(self._map)))
-            if hasattr(mmap, "MADV_HUGEPAGE"):
+            if self._file is None and hasattr(mmap, "MADV_HUGEPAGE"):
                 self._map.madvise(mmap.MADV_HUGEPAGE)
+
+    def spill(self, folder: Path) -> None:
+        """Move the array into a temporary file in ``folder``; from now on its
+        committed pages can be given back (:meth:`release`)."""
+        if self._file is not None:
+            return
+        fh = tempfile.TemporaryFile(dir=folder, prefix=".isoconvert-mesh-")
+        size = len(self._map)
+        fh.truncate(size)
+        mapped = FileMap(fh.fileno(), size)
+        step = 1 << 24
+        for a in range(0, size, step):  # piece by piece: no copy of the whole
+            mapped[a : a + step] = self._map[a : a + step]
+        self._map.close()
+        self._map, self._file = mapped, fh
+
+    def release(self, stop: int) -> None:
+        """Give back the pages of rows before ``stop`` (spilled arrays only)."""
+        if self._file is None or not hasattr(mmap, "MADV_DONTNEED"):
+            return
+        end = stop * self.row
+        end -= end % mmap.PAGESIZE
+        if end > 0:
+            self._map.madvise(mmap.MADV_DONTNEED, 0, end)
 
     def view(self, start: int, stop: int) -> np.ndarray:
         """Rows ``start <= r < stop`` (reserved or committed), writable."""
@@ -350,26 +394,40 @@ class _Growing:
         return flat.reshape(stop - start, *self.width)
 
     def final(self) -> np.ndarray:
-        """The committed rows; the map is then the array's."""
+        """The committed rows; the map (and its file) is then the array's."""
         if self.size == 0:
             return np.empty((0, *self.width), dtype=self.dtype)
         self._map.resize(self.size * self.row)
         out = self.view(0, self.size)
-        self._map = None
+        self._map = self._file = None  # the view keeps both open
         return out
+
+    def close(self) -> None:
+        """Drop the memory (and the file) of an array that will not be finished."""
+        self._map = self._file = None
 
 
 class MeshSink:
-    """The mesh being stitched (see :func:`stitch_blocks`), in memory.
+    """The mesh being stitched (see :func:`stitch_blocks`).
 
     A local slab's kernel writes straight into it (:meth:`allocate`); a
-    remote slab's arrays are copied in (:meth:`put`).
+    remote slab's arrays are copied in (:meth:`put`). Once it holds more
+    than ``spill_above`` bytes it moves into temporary files in
+    ``spill_dir`` (None: it stays in memory) and gives back the pages of
+    finished slabs, so memory holds a few slabs, not the mesh.
     """
 
-    def __init__(self, arity: int = 3) -> None:
+    def __init__(
+        self, arity: int = 3, spill_dir: Path | None = None, spill_above: int | None = None
+    ) -> None:
         self._vertices = _Growing((3,), np.float64)
         self._ids = _Growing((), np.int64)
         self._cells = _Growing((arity,), np.int64)
+        self._parts = (self._vertices, self._ids, self._cells)
+        self._spill_dir = spill_dir
+        self._spill_above = spill_above
+        self.spilled = False
+        self.starts: list[tuple[int, int]] = []  # (vertex, cell) start of each slab
 
     @property
     def counts(self) -> tuple[int, int]:
@@ -381,15 +439,20 @@ class MeshSink:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Arrays for a slab's kernel, after what is committed; valid until the
         next call (see :class:`_Growing`)."""
-        out = []
-        for part, n in (
-            (self._vertices, n_vertices),
-            (self._ids, n_vertices),
-            (self._cells, n_cells),
-        ):
+        sizes = (n_vertices, n_vertices, n_cells)
+        for part, n in zip(self._parts, sizes, strict=True):
             part.reserve(n)
-            out.append(part.view(part.size, part.size + n))
-        return tuple(out)
+        if (
+            not self.spilled
+            and self._spill_dir is not None
+            and sum(part.nbytes for part in self._parts) > (self._spill_above or 0)
+        ):
+            for part in self._parts:
+                part.spill(self._spill_dir)
+            self.spilled = True
+        return tuple(
+            part.view(part.size, part.size + n) for part, n in zip(self._parts, sizes, strict=True)
+        )
 
     def put(self, result: BlockResult) -> None:
         """Copy a slab's arrays in, where :meth:`allocate` would have put them."""
@@ -400,9 +463,14 @@ class MeshSink:
 
     def commit(self, n_vertices: int, n_cells: int) -> None:
         """Keep the first ``n_vertices`` and ``n_cells`` of the last slab's."""
+        self.starts.append(self.counts)
         self._vertices.size += n_vertices
         self._ids.size += n_vertices
         self._cells.size += n_cells
+        if self.spilled:  # the slab's cells wait for the next slab: keep them
+            self._vertices.release(self._vertices.size)
+            self._ids.release(self._ids.size)
+            self._cells.release(self.starts[-1][1])
 
     def renumber(self, start: int, stop: int, number: np.ndarray) -> None:
         """Replace committed cells ``start .. stop - 1`` (slab-local) by ``number`` of them."""
@@ -413,7 +481,70 @@ class MeshSink:
             del piece
 
     def mesh(self, info: dict) -> Mesh:
-        return Mesh(self._vertices.final(), self._cells.final(), self._ids.final(), info)
+        if self.spilled:
+            self._cells.release(self._cells.size)
+        parts = [part.final() for part in self._parts]
+        if not self.spilled:
+            return Mesh(parts[0], parts[2], parts[1], info)
+        return BlockMesh(parts[0], parts[2], parts[1], info, slab_starts=list(self.starts))
+
+    def close(self) -> None:
+        """Give up the mesh (an error or a restart)."""
+        for part in self._parts:
+            part.close()
+
+
+@dataclass
+class BlockMesh(Mesh):
+    """A mesh built block-wise that outgrew memory: its arrays are memory maps
+    of temporary files (writers stream them, see
+    :func:`isoconvert.writers.chunks.row_chunks`), and it knows where each
+    slab's vertices and cells start.
+
+    Attributes
+    ----------
+    slab_starts : list of (int, int)
+        (first vertex, first cell) of each slab.
+    """
+
+    slab_starts: list[tuple[int, int]] = field(default_factory=list)
+
+    def float32_windows(self):
+        """Pieces that together answer "does float32 lose anything?" as the
+        whole mesh would, or None when they cannot.
+
+        Yields, per slab, its cells (renumbered from its first vertex) with the
+        vertices of that slab and the next: a cell uses only those. Rounding
+        to float32 can only merge vertices closer than ``sqrt(3) 2**-23 m`` (m
+        the largest coordinate), and vertices of slabs two apart are more than
+        one grid step apart, so every merge and every triangle made degenerate
+        is seen in some piece, when a grid step is longer than that.
+        """
+        if not self.slab_starts or not len(self.vertices):
+            return None
+        grid = self.info.get("grid")
+        if not grid:
+            return None
+        affine = np.asarray(grid["affine"], dtype=np.float64)
+        # every vertex lies in the grid's box, so its corners bound the coordinates
+        corners = np.array(np.meshgrid(*[[0, n - 1] for n in grid["shape"]])).reshape(3, -1)
+        m = float(np.abs(affine @ corners + np.asarray(grid["origin"])[:, None]).max())
+        step = float(np.linalg.svd(affine, compute_uv=False).min())
+        if not step > 4 * np.sqrt(3) * 2.0**-23 * m:
+            return None
+        starts = [*self.slab_starts, (len(self.vertices), len(self.cells))]
+
+        from ..writers.chunks import release
+
+        def pieces():
+            for s in range(len(starts) - 1):
+                (v0, c0), (v1, c1) = starts[s], starts[s + 1]
+                v2 = starts[min(s + 2, len(starts) - 1)][0]
+                yield self.vertices[v0:v2], self.cells[c0:c1] - v0
+                release(self.vertices[max(0, v0 - 1) : v1])
+                release(self.cells[max(0, c0 - 1) : c1])
+
+        return pieces()
 
 
 @dataclass
@@ -582,15 +713,19 @@ def extract_blocks(
             source=volume.source,
         )
         jobs = [replace(template, k0=k0, k1=k1) for k0, k1 in ranges]
-        out = sink or MeshSink(arity)
+        out = sink or MeshSink(arity, blocks.spill_dir, blocks.budget // 4)
         stats = _Stats()
         results = runner(jobs) if runner else run_local(source, jobs, out.allocate)
         stop = auto and can_equal and not offset
         try:
             stitch_blocks(stats.tally(results, stop_on_equal=stop), out)
         except _Restart:
+            out.close()
             offset = NO_DEGENERATE_OFFSET
             continue
+        except BaseException:
+            out.close()
+            raise
         finally:
             results.close()
         break

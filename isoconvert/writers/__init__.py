@@ -30,10 +30,10 @@ Precision = Literal["float32", "float64", "adaptive", "as given"]
 class Writer:
     """A mesh format: its file suffixes and how to write it to a binary stream.
 
-    ``write(mesh, fh, ascii)`` receives the mesh as :func:`stored_mesh` makes
-    it: vertices already at the stored precision (``info["stored_precision"]``
-    says which), expanded for formats with ``expands``. The built-ins' ``write``
-    is a :class:`~isoconvert.lazy.LazyFunction`, imported on first use.
+    ``write(mesh, fh, ascii)`` receives float64 vertices and writes them at
+    ``info["stored_precision"]`` (:func:`stored_mesh` decides it); formats with
+    ``expands`` write each cell's vertices. The built-ins' ``write`` is a
+    :class:`~isoconvert.lazy.LazyFunction`, imported on first use.
     """
 
     name: str
@@ -52,6 +52,9 @@ class Writer:
     expands: bool = False
     #: whether the header records ``mesh.info["grid"]``
     records_grid: bool = False
+    #: whether it writes block by block, so a mesh larger than memory can
+    #: wait for it in temporary files (isoconvert.writers.chunks)
+    streams: bool = False
 
 
 WRITERS: Registry[Writer] = Registry("output format")
@@ -69,6 +72,7 @@ for _writer in (
         _BOTH,
         precision="adaptive",
         records_grid=True,
+        streams=True,
     ),
     Writer(
         "obj",
@@ -79,6 +83,7 @@ for _writer in (
         _BOTH,
         precision="float64",
         records_grid=True,
+        streams=True,
     ),
     Writer(
         "stl",
@@ -89,6 +94,7 @@ for _writer in (
         _TRIANGLES,
         precision="float32",
         expands=True,
+        streams=True,
     ),
     Writer(
         "svg",

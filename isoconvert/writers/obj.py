@@ -28,6 +28,6 @@ def write_obj(mesh: Mesh, fh: BinaryIO, ascii: bool = True) -> None:
     comments = header_comments(mesh, ascii=False)
     fh.write("".join(f"# {line}\n" for line in comments).encode("utf-8"))
     # 17 significant digits: vertices round-trip as float64
-    write_rows(fh, np.asarray(mesh.vertices, dtype=np.float64), "v %.17g %.17g %.17g\n")
-    cells = np.asarray(mesh.cells) + 1
-    write_rows(fh, cells, "f %d %d %d\n" if cells.shape[1] == 3 else "l %d %d\n")
+    write_rows(fh, mesh.vertices, "v %.17g %.17g %.17g\n", dtype=np.float64)
+    cells = mesh.cells
+    write_rows(fh, cells, "f %d %d %d\n" if cells.shape[1] == 3 else "l %d %d\n", add=1)

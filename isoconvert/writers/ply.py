@@ -7,6 +7,7 @@ from typing import BinaryIO
 import numpy as np
 
 from ..mesh import Mesh
+from .chunks import row_chunks
 from .header import header_comments
 from .text import write_rows
 
@@ -16,7 +17,7 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
     (segments) elements, indices int32.
 
     Coordinates are ``double`` when ``mesh.info["stored_precision"]`` is
-    "float64", else ``float`` (float32); :func:`isoconvert.write_mesh` decides
+    "float64", else ``float`` (float32, rounded here); :func:`isoconvert.write_mesh` decides
     (see :func:`isoconvert.writers.stored_mesh`). The header's comments say
     what made the mesh and record the grid it came from.
 
@@ -29,8 +30,8 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
         ``format ascii 1.0`` instead of ``binary_little_endian 1.0``.
     """
     double = mesh.info.get("stored_precision") == "float64"
-    verts = np.asarray(mesh.vertices, dtype=np.float64 if double else np.float32)
-    cells = np.asarray(mesh.cells)
+    verts = mesh.vertices
+    cells = mesh.cells
     triangles = cells.shape[1] == 3
     kind = "double" if double else "float"
     header = [
@@ -47,17 +48,21 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
     else:
         header += [f"element edge {len(cells)}", "property int vertex1", "property int vertex2"]
     fh.write(("\n".join(header) + "\nend_header\n").encode("ascii"))
+    stored = np.float64 if double else np.float32
     if ascii:
         # 17 significant digits give a double back exactly, 9 a float
         digits = 17 if double else 9
-        write_rows(fh, verts, f"%.{digits}g %.{digits}g %.{digits}g\n")
+        write_rows(fh, verts, f"%.{digits}g %.{digits}g %.{digits}g\n", dtype=stored)
         write_rows(fh, cells, "3 %d %d %d\n" if triangles else "%d %d\n")
         return
-    fh.write(verts.astype("<f8" if double else "<f4", copy=False).tobytes())
-    if triangles:
-        record = np.empty(len(cells), dtype=[("n", "u1"), ("v", "<i4", (3,))])
-        record["n"] = 3
-        record["v"] = cells
-        fh.write(record.tobytes())
-    else:
-        fh.write(cells.astype("<i4").tobytes())
+    for block in row_chunks(verts):
+        fh.write(block.astype("<f8" if double else "<f4", copy=False).tobytes())
+    record = np.dtype([("n", "u1"), ("v", "<i4", (3,))]) if triangles else np.dtype("<i4")
+    for block in row_chunks(cells):
+        if triangles:
+            out = np.empty(len(block), dtype=record)
+            out["n"] = 3
+            out["v"] = block
+        else:
+            out = block.astype(record)
+        fh.write(out.tobytes())

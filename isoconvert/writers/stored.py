@@ -16,7 +16,8 @@ from ..errors import FormatError
 from ..geometry import normalized_grid
 from ..mesh import Mesh
 from . import WRITERS, Writer, output_format
-from .precision import float32_loss
+from .chunks import row_chunks
+from .precision import Float32Loss, float32_loss
 
 
 def _check_cells(writer: Writer, mesh: Mesh, name: str | Path) -> None:
@@ -27,7 +28,7 @@ def _check_cells(writer: Writer, mesh: Mesh, name: str | Path) -> None:
         raise FormatError(f"{name}: {writer.name} cannot hold {kind}; write {' or '.join(fits)}")
     cells = np.asarray(mesh.cells)
     n = len(mesh.vertices)
-    if cells.size and (cells.min() < 0 or cells.max() >= n):
+    if any(block.min() < 0 or block.max() >= n for block in row_chunks(cells) if block.size):
         bad = (cells < 0) | (cells >= n)
         row = int(np.flatnonzero(bad.any(axis=1))[0])
         index = int(cells[row][bad[row]][0])
@@ -43,10 +44,11 @@ def _stored(
 ) -> Mesh:
     """The one code path behind :func:`stored_mesh` and :func:`write_mesh`.
 
-    With ``expand=False`` a format that ``expands`` gets its vertices rounded
-    and only those cells use, still indexed: its writer expands them (as
-    ``vertices[cells]``, which leaves an expanded mesh as it is), without a
-    float64 copy of three vertices per triangle.
+    With ``expand=False`` (writing) the vertices stay as they are, float64,
+    and a format that ``expands`` gets only the vertices its cells use, still
+    indexed: the writers round to ``info["stored_precision"]`` and expand
+    block by block (as ``vertices[cells]``, which leaves an expanded mesh as it
+    is), so writing needs no copy of the mesh.
     """
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     cells = np.asarray(mesh.cells, dtype=np.int64)
@@ -54,7 +56,8 @@ def _stored(
     if writer.expands and len(cells):
         # only the vertices that cells use reach the file
         used = np.zeros(len(vertices), dtype=bool)
-        used[cells.ravel()] = True
+        for block in row_chunks(cells):
+            used[block.ravel()] = True
         if not used.all():
             renumber = np.cumsum(used) - 1
             vertices, cells = vertices[used], renumber[cells]
@@ -62,7 +65,7 @@ def _stored(
         vertices = vertices[:0]
     precision = writer.precision
     if precision == "adaptive":
-        loss = float32_loss(vertices, cells, count_degenerate=False)
+        loss = _float32_loss(vertices, cells, mesh)
         precision = "float64" if loss.any else "float32"
         if loss.any and on_status:
             on_status(
@@ -76,7 +79,7 @@ def _stored(
                 "precision; write PLY (which then stores doubles) or OBJ, or move the origin "
                 "nearer the mesh"
             )
-    if precision == "float32":
+    if precision == "float32" and expand:
         with np.errstate(over="ignore", invalid="ignore"):
             vertices = vertices.astype(np.float32).astype(np.float64)
     info = {k: v for k, v in mesh.info.items() if k not in ("grid", "stored_precision")}
@@ -90,6 +93,26 @@ def _stored(
         vertices = vertices[cells].reshape(-1, 3)
         cells = np.arange(len(vertices), dtype=np.int64).reshape(-1, cells.shape[1])
     return Mesh(vertices, cells, None, info)
+
+
+def _float32_loss(vertices: np.ndarray, cells: np.ndarray, mesh: Mesh):
+    """:func:`float32_loss` (without counting degenerate cells once anything is
+    lost); for a mesh built block-wise, slab pair by slab pair
+    (:meth:`~isoconvert.extract.blocks.BlockMesh.float32_windows`), with memory
+    of the order of two slabs."""
+    windows = getattr(mesh, "float32_windows", None)
+    if windows is None or vertices is not mesh.vertices or cells is not mesh.cells:
+        return float32_loss(vertices, cells, count_degenerate=False)
+    parts = windows()
+    if parts is None:
+        return float32_loss(vertices, cells, count_degenerate=False)
+    total = Float32Loss()
+    for window_vertices, window_cells in parts:
+        loss = float32_loss(window_vertices, window_cells, count_degenerate=False)
+        if loss.any:
+            return loss  # what is lost somewhere: the answer, as for the whole mesh
+        total = loss
+    return total
 
 
 def stored_mesh(
