@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import VolumeError
-from .grid import LazyGrid
+from .grid import LazyGrid, SlabReader
 
 #: dtypes the extractors accept without conversion (the kernels specialize on them).
 SUPPORTED_DTYPES = (
@@ -204,9 +204,10 @@ def slabs(data: np.ndarray | LazyGrid):
     (and a lazy grid is read one slab at a time)."""
     per_slice = max(1, int(np.prod(data.shape[:-1])))
     step = max(1, _CHUNK_SAMPLES // per_slice)
+    reader = SlabReader(data) if isinstance(data, LazyGrid) else None
     for k in range(0, data.shape[-1], step):
-        if isinstance(data, LazyGrid):
-            yield data.read_zyx(k, min(k + step, data.shape[2])).T
+        if reader is not None:
+            yield reader.read(k, min(k + step, data.shape[2])).T
         else:
             yield data[..., k : k + step]
 

@@ -12,7 +12,7 @@ from ..errors import FormatError, InputNotFoundError, IsoconvertError, VolumeErr
 from ..lazy import LazyFunction
 from ..registry import Registry
 from .options import ReadOptions
-from .stacks import TIFF_SUFFIXES, natural_key
+from .stacks import TIFF_SUFFIXES, is_zarr_store, natural_key
 
 if TYPE_CHECKING:
     from ..volume import Volume
@@ -36,6 +36,8 @@ class Reader:
     options: frozenset[str]
     #: True when a folder or glob of files is one volume of this format.
     stacks: bool = False
+    #: True when the input is a folder (a Zarr store), not a file.
+    folder: bool = False
 
 
 READERS: Registry[Reader] = Registry("input format")
@@ -68,6 +70,17 @@ READERS.register(
         LazyFunction("isoconvert.readers.tiff:read_tiff"),
         frozenset({"channel"}),
         stacks=True,
+    ),
+)
+READERS.register(
+    "zarr",
+    Reader(
+        "zarr",
+        "Zarr 2/3 store (a folder), plain (z, y, x) array or OME-Zarr (--scale picks the level)",
+        (".zarr",),
+        LazyFunction("isoconvert.readers.zarr:read_zarr"),
+        frozenset({"scale", "channel", "allow_missing_chunks"}),
+        folder=True,
     ),
 )
 READERS.register(
@@ -155,6 +168,8 @@ def unsupported_format(path: Path) -> str | None:
 
 def _unsupported_folder(folder: Path) -> str | None:
     """A folder that holds no TIFF slices but files of a format not read yet."""
+    if is_zarr_store(folder):
+        return None
     try:
         files = sorted((p for p in folder.iterdir() if p.is_file()), key=natural_key)
     except OSError:
@@ -181,10 +196,15 @@ def _unsupported_folder(folder: Path) -> str | None:
 
 
 def detect_format(spec: str) -> str:
-    """Name of the reader for a path, folder or glob, from its suffix."""
+    """Name of the reader for a path, folder or glob, from its suffix.
+
+    A folder is a Zarr store when named ``*.zarr`` or holding Zarr metadata
+    (``zarr.json``, ``.zarray``, ``.zgroup``, ``.zattrs``), else a stack of TIFF slices.
+    """
     path = Path(spec)
     if path.is_dir():
-        return "tiff"
+        zarr = path.suffix.lower() == ".zarr" or is_zarr_store(path)
+        return "zarr" if zarr else "tiff"
     suffix = path.suffix.lower()
     if not path.exists() and globlib.has_magic(spec):
         suffix = Path(spec.rstrip("*?]")).suffix.lower() or suffix
@@ -200,6 +220,9 @@ def detect_format(spec: str) -> str:
     )
 
 
+_PERMISSIONS = frozenset({"allow_outside_data", "allow_missing_chunks"})
+
+
 def read_volume(
     path: str | Path,
     *,
@@ -213,15 +236,18 @@ def read_volume(
     Parameters
     ----------
     path : str or Path
-        The input. A folder or glob is a stack of TIFF slices.
+        The input. A folder or glob is a stack of TIFF slices, unless the
+        folder is a Zarr store.
     format : str or None
-        Reader name (``raw``, ``nrrd``, ``tiff``); None guesses from the suffix.
+        Reader name (``raw``, ``nrrd``, ``tiff``, ``zarr``, ``image``); None
+        guesses from the suffix (see :func:`detect_format`).
     spacing, origin : sequence of float or None
         Override what the file says (x, y[, z]).
     **options
         Fields of :class:`ReadOptions`: ``shape``, ``dtype``, ``endian``,
         ``header_bytes`` (raw), ``channel`` (multi-channel images),
-        ``allow_outside_data`` (detached NRRD data outside the header's folder).
+        ``allow_outside_data`` (detached NRRD data outside the header's folder),
+        ``scale`` (OME-Zarr resolution level), ``allow_missing_chunks`` (Zarr).
 
     Raises
     ------
@@ -245,15 +271,21 @@ def read_volume(
             raise FormatError(f"{spec}: {reason}")
     name = format.lower() if format else detect_format(spec)
     reader = READERS.get(name)
-    if (p.is_dir() or not p.exists()) and not reader.stacks:
-        raise FormatError(f"{spec}: a folder or glob is read as a stack of TIFF slices, not {name}")
+    if (p.is_dir() and not (reader.stacks or reader.folder)) or (
+        not p.exists() and not reader.stacks
+    ):
+        raise FormatError(
+            f"{spec}: a folder or glob is read as a stack of TIFF slices (a folder also as a "
+            f"Zarr store), not {name}"
+        )
     try:
         opts = ReadOptions(**options)
     except TypeError as exc:
         raise VolumeError(f"unknown read option: {exc}") from None
-    # permission to read companion files is harmless where a format has none, so
-    # one --allow-outside-data can apply to a whole batch
-    stray = opts.given() - reader.options - {"allow_outside_data"}
+    # permissions (to read companion files, to read missing Zarr chunks as the fill
+    # value) are harmless where a format has no use for them, so one flag can apply
+    # to a whole batch
+    stray = opts.given() - reader.options - _PERMISSIONS
     if stray:
         flags = ", ".join("--" + s.replace("_", "-") for s in sorted(stray))
         raise VolumeError(f"{spec}: {flags} do(es) not apply to {name} input")

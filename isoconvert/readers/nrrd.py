@@ -4,6 +4,9 @@ pynrrd parses the header fields and reads the ascii encoding, where the file's
 size bounds the work. The binary encodings (raw, gzip, bzip2) and hex are read
 here, so that compressed data is never decompressed past the size the header
 declares (a gzip bomb stops after a few MiB) and raw data is memory-mapped.
+A 3D volume whose raw or compressed samples are in one file is read lazily,
+slab by slab (:class:`~isoconvert.grid.RawGrid`, :class:`CompressedNrrdGrid`),
+so that it need not fit in memory; multi-file, hex and ascii data are read whole.
 Detached data files must lie in the header's folder or below unless the caller
 allows otherwise (``allow_outside_data``): a header from elsewhere must not be
 able to make the tool read any file on the machine.
@@ -14,13 +17,17 @@ from __future__ import annotations
 import bz2
 import os
 import re
+import threading
+import weakref
 import zlib
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import FormatError, VolumeError, one_line
+from ..grid import LazyGrid, RawGrid, read_exactly
 from ..memory import check_fits
 from ..volume import Volume
 from .options import ReadOptions, select_channel
@@ -34,6 +41,9 @@ _MAX_LINE = 1 << 20  # bytes of one header line
 _MAX_HEADER = 64 << 20  # bytes of a whole header (a LIST of many files included)
 _IN_CHUNK = 1 << 20  # compressed bytes read at a time
 _OUT_CHUNK = 4 << 20  # decompressed bytes produced at a time
+# Compressed volumes up to this size (decompressed) are decoded once when read, to find a
+# truncated or corrupt stream before any work is done; larger ones as their slabs are read.
+_CHECK_AT_OPEN = 64 << 20
 _GUIDE = "convert it with 3D Slicer or unu (teem)"
 
 _ENCODINGS = {
@@ -67,6 +77,12 @@ def read_nrrd(path: Path, options: ReadOptions) -> Volume:
     positions are then in the file's world space (e.g. LPS for medical data).
     Detached data (one file, numbered files, or a ``LIST``) must lie in the
     header's folder or below unless ``options.allow_outside_data``.
+
+    A 3D volume of three spatial axes whose samples are raw or gzip/bzip2 in
+    one file (attached or detached) is lazy: a :class:`~isoconvert.grid.RawGrid`
+    or a :class:`CompressedNrrdGrid`. Compressed data up to 64 MiB is checked
+    whole here; beyond, a truncated or corrupt stream is found by the read that
+    reaches it (the same one-line :class:`FormatError`).
     """
     parsed = _read_header(path)
     header = parsed.fields
@@ -298,8 +314,9 @@ def _data_path(header: Path, name: str, allow_outside: bool, check: bool = True)
 
 def _read_data(
     path: Path, parsed: _Header, files: list[Path] | None, subdim: int | None
-) -> np.ndarray:
-    """All samples as an (x, y, z, ...) Fortran-ordered view of a C-ordered array."""
+) -> np.ndarray | LazyGrid:
+    """All samples as an (x, y, z, ...) Fortran-ordered view of a C-ordered array,
+    or a lazy grid for a 3D volume of spatial axes held in one raw or compressed file."""
     from nrrd.reader import _determine_datatype
 
     header = parsed.fields
@@ -335,10 +352,28 @@ def _read_data(
     )
     per_part = total // len(sources)
     described = f"sizes {' '.join(map(str, sizes))} of {header['type']}"
+    # a volume of three spatial axes (no channel to pick) in one file is read slab by slab
+    lazy = (
+        len(sources) == 1 and len(sizes) == 3 and spatial_axes(header.get("kinds"), 3) == [0, 1, 2]
+    )
     if len(sources) == 1 and encoding == "raw":
-        mapped = _map_raw(path, sources[0], per_part, dtype, line_skip, byte_skip, described)
-        if mapped is not None:
-            return mapped.reshape(sizes[::-1]).T
+        nbytes = total * dtype.itemsize
+        begin = _raw_begin(path, sources[0], nbytes, line_skip, byte_skip, described)
+        if lazy:
+            return RawGrid(sources[0][0], dtype, tuple(sizes), begin)
+        if begin % dtype.itemsize == 0:
+            # unaligned samples would slow down or upset the kernels: those are read as a copy
+            mapped = np.memmap(sources[0][0], dtype=dtype, mode="c", offset=begin, shape=(total,))
+            return np.asarray(mapped).reshape(sizes[::-1]).T
+    if lazy and encoding in ("gzip", "bzip2"):
+        grid = CompressedNrrdGrid(
+            path, sources[0], encoding, dtype, tuple(sizes), line_skip, byte_skip, described
+        )
+        # a slab-wise read holds at least two z-layers (one block and its overlap)
+        check_fits(2 * sizes[0] * sizes[1] * dtype.itemsize, "a slab of two z-layers", str(path))
+        if grid.nbytes <= _CHECK_AT_OPEN:
+            grid.check()
+        return grid
     check_fits(total * dtype.itemsize, "the declared volume", str(path))
     out = np.empty(total, dtype=dtype)
     for i, source in enumerate(sources):
@@ -395,27 +430,17 @@ def _raw_span(path, source, fh, nbytes, byte_skip, described) -> int:
     return begin
 
 
-def _map_raw(path, source, count, dtype, line_skip, byte_skip, described):
-    """Memory-map a single raw data source (copy-on-write), or None when misaligned."""
-    nbytes = count * dtype.itemsize
+def _raw_begin(path, source, nbytes, line_skip, byte_skip, described) -> int:
+    """Offset of the ``nbytes`` raw samples of a data source, checked to be all there."""
     with _open_at_data(source, line_skip) as fh:
-        begin = _raw_span(path, source, fh, nbytes, byte_skip, described)
-    if begin % dtype.itemsize:
-        return None  # unaligned samples would slow down or upset the kernels: read a copy
-    return np.asarray(np.memmap(source[0], dtype=dtype, mode="c", offset=begin, shape=(count,)))
+        return _raw_span(path, source, fh, nbytes, byte_skip, described)
 
 
 def _read_raw_part(path, source, out, line_skip, byte_skip, described) -> None:
     with _open_at_data(source, line_skip) as fh:
         begin = _raw_span(path, source, fh, out.nbytes, byte_skip, described)
         fh.seek(begin)
-        view = memoryview(out.view(np.uint8))
-        got = 0
-        while got < len(view):
-            n = fh.readinto(view[got:])
-            if not n:
-                break
-            got += n
+        got = read_exactly(fh, out)
     if got != out.nbytes:
         raise FormatError(
             f"{path}: the NRRD data cannot be read: {_where(path, source)} ended after {got} of "
@@ -494,32 +519,227 @@ class _Inflater:
         return done
 
 
+class _CompressedStream:
+    """One gzip or bzip2 data source, open and decoded as far as read, with checked reads.
+
+    Every read or skip that finds the stream shorter than the header declares,
+    or corrupt, raises a one-line :class:`FormatError` naming the header, and
+    nothing is ever decoded past the declared size (plus one byte, to tell
+    that there is more): a compression bomb costs a few MiB at most.
+
+    Parameters
+    ----------
+    path : Path
+        The header, for messages.
+    source : (Path, int)
+        The file holding the stream and where its data part starts.
+    encoding : str
+        "gzip" or "bzip2".
+    line_skip, byte_skip : int
+        Lines skipped in the file; decompressed bytes skipped before the samples.
+    nbytes : int
+        Bytes of the samples the header declares.
+    described : str
+        The header's sizes and type, for messages.
+    """
+
+    def __init__(self, path, source, encoding, line_skip, byte_skip, nbytes, described) -> None:
+        self._path, self._encoding, self._described = path, encoding, described
+        self._where = "the file" if source[0] == path else f"data file {source[0].name}"
+        self._declared = byte_skip + nbytes
+        self.got = 0  # decompressed bytes passed so far, byte skip included
+        with self._decoding():
+            fh = _open_at_data(source, line_skip)
+        # the file closes with the stream, even when the stream is dropped unclosed
+        self._closer = weakref.finalize(self, fh.close)
+        self._inflater = _Inflater(fh, encoding)
+        self.skip(byte_skip)
+
+    def __enter__(self) -> _CompressedStream:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._closer()
+
+    @contextmanager
+    def _decoding(self):
+        try:
+            yield
+        except (zlib.error, OSError, EOFError) as exc:
+            raise FormatError(
+                f"{self._path}: not a readable NRRD file: the {self._encoding} data in "
+                f"{self._where} is corrupt or truncated ({one_line(exc)})"
+            ) from None
+
+    def _ended(self, wanted: int, done: int) -> None:
+        self.got += done
+        if done < wanted:
+            raise FormatError(
+                f"{self._path}: the NRRD data cannot be read: the compressed data in "
+                f"{self._where} holds {self.got} bytes, fewer than the {self._declared} its "
+                f"header declares ({self._described}); the file is truncated or its sizes are "
+                "wrong"
+            )
+
+    def skip(self, n: int) -> None:
+        """Decode and drop ``n`` bytes."""
+        with self._decoding():
+            done = self._inflater.skip(n)
+        self._ended(n, done)
+
+    def readinto(self, out: np.ndarray) -> None:
+        """Fill the contiguous array ``out`` with the next ``out.nbytes`` bytes."""
+        with self._decoding():
+            done = self._inflater.readinto(memoryview(out.reshape(-1).view(np.uint8)))
+        self._ended(out.nbytes, done)
+
+    def check_end(self) -> None:
+        """After the declared bytes: the stream must hold no more."""
+        with self._decoding():
+            extra = bool(self._inflater.chunk(1))
+        if extra:
+            raise FormatError(
+                f"{self._path}: the compressed data in {self._where} holds more than the "
+                f"{self._declared} bytes its header declares ({self._described}); the file is "
+                "corrupt or its sizes are wrong"
+            )
+
+
 def _read_compressed_part(path, source, out, line_skip, byte_skip, described, encoding) -> None:
-    where = "the file" if source[0] == path else f"data file {source[0].name}"
-    declared = byte_skip + out.nbytes
-    try:
-        with _open_at_data(source, line_skip) as fh:
-            inflater = _Inflater(fh, encoding)
-            got = inflater.skip(byte_skip)
-            if got == byte_skip:
-                got += inflater.readinto(memoryview(out.view(np.uint8)))
-            extra = got == declared and bool(inflater.chunk(1))
-    except (zlib.error, OSError, EOFError) as exc:
-        raise FormatError(
-            f"{path}: not a readable NRRD file: the {encoding} data in {where} is corrupt or "
-            f"truncated ({one_line(exc)})"
-        ) from None
-    if got < declared:
-        raise FormatError(
-            f"{path}: the NRRD data cannot be read: the compressed data in {where} holds {got} "
-            f"bytes, fewer than the {declared} its header declares ({described}); the file is "
-            "truncated or its sizes are wrong"
+    args = (path, source, encoding, line_skip, byte_skip, out.nbytes, described)
+    with _CompressedStream(*args) as stream:
+        stream.readinto(out)
+        stream.check_end()
+
+
+class CompressedNrrdGrid(LazyGrid):
+    """A 3D NRRD volume stored as one gzip or bzip2 stream, decoded slab by slab.
+
+    A compressed stream can only be decoded from its start, so the grid keeps
+    its open stream between reads, and a copy of the last layer it read: a
+    read that starts at or after that layer decodes on from where the last
+    one stopped (reads in increasing z, block-wise extraction's slabs that
+    overlap by one layer included, decode the stream once in all), while a
+    read of earlier layers opens the stream again and decodes, dropping, up
+    to its first layer. Hence ``sequential``. The open stream is this
+    process's cache: pickling drops it, and an unpickled grid (a Dask
+    worker's) opens its own on its first read.
+
+    The checks of a whole read hold for every slab: a stream shorter than
+    declared, or corrupt, fails the read that reaches the gap, and the read of
+    the last layer checks that the stream holds nothing more; nothing is
+    decoded past the declared size.
+
+    Parameters
+    ----------
+    path : Path
+        The header (named in messages).
+    source : (Path, int)
+        The file holding the stream (the header itself when attached) and the
+        offset where its data part starts.
+    encoding : str
+        "gzip" or "bzip2".
+    dtype : numpy dtype
+        Of the samples, with their byte order.
+    shape : (3,) tuple of int
+        (X, Y, Z), the header's sizes.
+    line_skip, byte_skip : int
+        Lines skipped in the file; decompressed bytes skipped before the samples.
+    described : str
+        The header's sizes and type, for messages.
+
+    Attributes
+    ----------
+    opened : int
+        How many times this process opened the stream for a read, to decode it
+        from its start (1 after any number of reads in increasing z).
+    """
+
+    sequential = True
+
+    def __init__(self, path, source, encoding, dtype, shape, line_skip, byte_skip, described):
+        self.path = Path(path)
+        self.source = (Path(source[0]), int(source[1]))
+        self.encoding = encoding
+        self.dtype = np.dtype(dtype)
+        self.shape = tuple(int(n) for n in shape)
+        self.line_skip, self.byte_skip = int(line_skip), int(byte_skip)
+        self.described = described
+        self._reset()
+
+    def _reset(self) -> None:
+        self.opened = 0
+        self._stream: _CompressedStream | None = None
+        self._next = 0  # the first layer the open stream has not passed
+        self._last: np.ndarray | None = None  # layer _next - 1, kept for overlapping reads
+        self._lock = threading.Lock()  # one read at a time moves the stream
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        for name in ("opened", "_stream", "_next", "_last", "_lock"):
+            del state[name]
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._reset()
+
+    def _open(self) -> _CompressedStream:
+        return _CompressedStream(
+            self.path,
+            self.source,
+            self.encoding,
+            self.line_skip,
+            self.byte_skip,
+            self.nbytes,
+            self.described,
         )
-    if extra:
-        raise FormatError(
-            f"{path}: the compressed data in {where} holds more than the {declared} bytes its "
-            f"header declares ({described}); the file is corrupt or its sizes are wrong"
-        )
+
+    def check(self) -> None:
+        """Decode the whole stream once, dropping the samples, with the checks of a read.
+
+        Raises
+        ------
+        FormatError
+            The stream is corrupt, or holds fewer or more bytes than declared.
+        """
+        with self._open() as stream:
+            stream.skip(self.nbytes)
+            stream.check_end()
+
+    def read_zyx(self, k0: int, k1: int) -> np.ndarray:
+        out = self._empty_slab(k0, k1)
+        nx, ny, nz = self.shape
+        layer = nx * ny * self.dtype.itemsize
+        if k1 == k0:
+            return out
+        with self._lock:
+            stream, self._stream = self._stream, None  # put back only after a good read
+            kept = 0  # leading layers of ``out`` taken from the kept last layer
+            if stream is not None and k0 == self._next - 1:
+                out[0] = self._last
+                kept = 1
+            elif stream is None or self._next > k0:
+                if stream is not None:
+                    stream.close()
+                stream, self._next = self._open(), 0
+                self.opened += 1
+            self._last = None
+            try:
+                stream.skip((k0 + kept - self._next) * layer)
+                stream.readinto(out[kept:])
+                if k1 == nz:
+                    stream.check_end()
+                    stream.close()
+                else:
+                    self._stream, self._next, self._last = stream, k1, out[-1].copy()
+            except BaseException:
+                stream.close()
+                raise
+        return out
 
 
 def _read_hex_part(path, source, out, line_skip, byte_skip, described) -> None:

@@ -34,6 +34,14 @@ class ReadOptions:
         the header's folder and its sub-folders. Off by default, so that a
         header from an untrusted source cannot make the tool read any file on
         the machine.
+    scale : int
+        Multi-resolution inputs (OME-Zarr): the resolution level to read, 0
+        being the full resolution.
+    allow_missing_chunks : bool
+        Zarr: read a chunk missing from the store as the array's fill value,
+        as zarr itself does. Off by default, because a missing chunk usually
+        means an incomplete copy; some writers (zarr-python 3 by default) skip
+        chunks that hold only the fill value, and their stores need this.
     """
 
     shape: tuple[int, ...] | None = None
@@ -42,6 +50,8 @@ class ReadOptions:
     header_bytes: int = 0
     channel: int | None = None
     allow_outside_data: bool = False
+    scale: int = 0
+    allow_missing_chunks: bool = False
 
     def given(self) -> set[str]:
         """Names of the options that differ from their defaults."""
@@ -49,21 +59,37 @@ class ReadOptions:
         return {f.name for f in fields(self) if getattr(self, f.name) != getattr(default, f.name)}
 
 
+def check_channel(count: int | None, channel: int | None, path: Path, what: str) -> int | None:
+    """The channel to read of ``count`` (None: the file has no channel axis).
+
+    For readers that decide from headers, before reading any sample. ``what``
+    names the channels in messages ("values per sample (vector)").
+
+    Raises
+    ------
+    VolumeError
+        ``channel`` given without a channel axis, missing with one, or out of range.
+    """
+    if count is None:
+        if channel is not None:
+            raise VolumeError(f"{path}: --channel given, but the file has one value per sample")
+        return None
+    if channel is None:
+        raise VolumeError(f"{path}: {count} {what}; choose one with --channel 0..{count - 1}")
+    if not 0 <= channel < count:
+        raise VolumeError(f"{path}: --channel {channel} is out of range 0..{count - 1}")
+    return channel
+
+
 def select_channel(
     array: np.ndarray, axis: int | None, channel: int | None, path: Path, what: str
 ) -> np.ndarray:
     """Take ``channel`` along ``axis`` (the channel axis, or None when there is none).
 
-    ``what`` names the channels in messages ("values per sample (vector)").
+    ``what`` names the channels in messages ("values per sample (vector)");
+    the checks are :func:`check_channel`'s.
     """
-    if axis is None:
-        if channel is not None:
-            raise VolumeError(f"{path}: --channel given, but the file has one value per sample")
-        return array
-    n = array.shape[axis]
-    if channel is None:
-        raise VolumeError(f"{path}: {n} {what}; choose one with --channel 0..{n - 1}")
-    if not 0 <= channel < n:
-        raise VolumeError(f"{path}: --channel {channel} is out of range 0..{n - 1}")
+    count = None if axis is None else array.shape[axis]
+    index = check_channel(count, channel, path, what)
     # the method np.take calls: ReadOptions users (the CLI) need not import numpy
-    return array.take(channel, axis=axis)
+    return array if index is None else array.take(index, axis=axis)

@@ -1,17 +1,31 @@
-"""TIFF stacks (tifffile): one multi-page file, a folder of slices, or a glob."""
+"""TIFF stacks (tifffile): one multi-page file, a folder of slices, or a glob.
+
+A 3D stack is read lazily, a z-layer being one page of the file or one file of
+the folder (:class:`TiffStackGrid`): opening it reads the page headers only (the
+checks that every page or slice matches need no pixel), and block-wise
+extraction reads the pages of one slab at a time. 2D images, and files whose
+layers are not whole pages (a truncated ImageJ file, volumetric tiles), are
+read whole.
+"""
 
 from __future__ import annotations
 
 import glob as globlib
+import math
+from collections.abc import Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import FormatError, InputNotFoundError, VolumeError, one_line
+from ..grid import LazyGrid
 from ..memory import check_fits
 from ..volume import Volume
-from .options import ReadOptions, select_channel
+from .options import ReadOptions, check_channel
 from .stacks import TIFF_SUFFIXES, natural_key
+
+_CHANNELS = "channels (RGB or multi-channel)"
 
 
 def slice_files(spec: str) -> list[Path]:
@@ -28,12 +42,24 @@ def slice_files(spec: str) -> list[Path]:
     return sorted(files, key=natural_key)
 
 
+@contextmanager
+def _readable(path: Path | str):
+    """Turn what tifffile raises on a corrupt file into a one-line FormatError naming it."""
+    import tifffile
+
+    try:
+        yield
+    except (tifffile.TiffFileError, ValueError, OSError, IndexError, KeyError) as exc:
+        raise FormatError(f"{path}: not a readable TIFF ({one_line(exc)})") from None
+
+
 def read_tiff(path: Path, options: ReadOptions) -> Volume:
     """Read a multi-page TIFF file, or a folder / glob of single-page slices.
 
     Spacing comes from ImageJ metadata (``spacing`` for z, resolution tags for x
     and y, which hold pixels per unit) or OME metadata; without a z spacing it
-    is 1 on every axis and a note says so.
+    is 1 on every axis and a note says so. A 3D stack is a lazy
+    :class:`TiffStackGrid`; a 2D image is read whole.
     """
     import tifffile
 
@@ -42,26 +68,36 @@ def read_tiff(path: Path, options: ReadOptions) -> Volume:
         files = [path]
     else:
         files = slice_files(spec)
-    try:
+    with _readable(spec):
         if len(files) == 1:
-            with tifffile.TiffFile(files[0]) as tif:
-                series = tif.series[0]
-                series_notes = _check_series(tif, files[0])
-                declared = int(np.prod(series.shape, dtype=np.float64)) * series.dtype.itemsize
-                check_fits(declared, "the declared image series", spec)
-                data = _pick_channel(series.asarray(), series.axes, options.channel, files[0])
-                spacing, unit, notes = _spacing(tif, data.ndim)
-                notes = series_notes + notes
+            data, spacing, unit, notes = _read_file(files[0], options.channel, spec)
         else:
-            data = _stack_slices(files, options.channel)
+            data = _slice_stack(files, options.channel, spec)
             with tifffile.TiffFile(files[0]) as tif:
                 spacing, unit, notes = _spacing(tif, 3)
             notes.insert(0, f"{len(files)} slices, {files[0].name} .. {files[-1].name}")
-    except (tifffile.TiffFileError, ValueError, OSError, IndexError, KeyError) as exc:
-        raise FormatError(f"{spec}: not a readable TIFF ({one_line(exc)})") from None
+    if isinstance(data, LazyGrid):
+        return Volume(data, spacing=spacing, source=spec, notes=notes, unit=unit)
     if data.dtype == np.bool_:
         data = data.view(np.uint8)
     return Volume.from_zyx(data, spacing=spacing, source=spec, notes=notes, unit=unit)
+
+
+def _read_file(path: Path, channel: int | None, spec: str):
+    """A single TIFF file: (grid or (Z, Y, X) / (Y, X) array, spacing, unit, notes)."""
+    import tifffile
+
+    with tifffile.TiffFile(path) as tif:
+        series = tif.series[0]
+        series_notes = _check_series(tif, path)
+        index, axes = _selection(series.axes, series.shape, channel, path)
+        data = _page_grid(tif, series, index, spec) if len(axes) == 3 else None
+        if data is None:
+            declared = int(np.prod(series.shape, dtype=np.float64)) * series.dtype.itemsize
+            check_fits(declared, "the declared image series", spec)
+            data = _pick_channel(series.asarray(), series.axes, channel, path)
+        spacing, unit, notes = _spacing(tif, data.ndim)
+    return data, spacing, unit, series_notes + notes
 
 
 def _check_series(tif, path: Path) -> list[str]:
@@ -103,51 +139,201 @@ def kept_axes(axes: str, shape: tuple[int, ...]) -> str:
 
     Of these, a ``C`` or ``S`` axis is the channel axis; the others are the image's.
     """
-    return "".join(a for a, n in zip(axes, shape, strict=True) if n > 1 or a in "XY")
+    return "".join(axes[i] for i in _kept(axes, shape))
+
+
+def _kept(axes: str, shape: tuple[int, ...]) -> list[int]:
+    """Positions of the axes :func:`kept_axes` keeps."""
+    return [i for i, (a, n) in enumerate(zip(axes, shape, strict=True)) if n > 1 or a in "XY"]
+
+
+def _selection(
+    axes: str, shape: tuple[int, ...], channel: int | None, path: Path
+) -> tuple[tuple[int | slice, ...], str]:
+    """How to take the scalar image out of a TIFF series, from its axes alone.
+
+    Singleton axes are dropped (index 0), and ``channel`` is taken along the
+    first kept ``C`` or ``S`` axis (:func:`kept_axes`).
+
+    Returns
+    -------
+    index : tuple of int or slice
+        One entry per series axis: ``series_array[index]`` is the image.
+    axes : str
+        The image's axes, 2 or 3 of them (e.g. ``"ZYX"``).
+
+    Raises
+    ------
+    VolumeError
+        ``channel`` missing, out of range or given without a channel axis, or
+        an image that is not 2D or 3D once the channel is taken.
+    """
+    kept = _kept(axes, shape)
+    chan = next((i for i in kept if axes[i] in "CS"), None)
+    picked = check_channel(None if chan is None else shape[chan], channel, path, _CHANNELS)
+    index = tuple(
+        picked if i == chan else slice(None) if i in kept else 0 for i in range(len(axes))
+    )
+    left = "".join(axes[i] for i in kept if i != chan)
+    if len(left) not in (2, 3):
+        raise VolumeError(
+            f"{path}: a TIFF with axes {left} is not a 2D or 3D scalar image "
+            "(time series and multi-series files are not supported)"
+        )
+    return index, left
+
+
+def _sliced(shape: tuple[int, ...], index: tuple) -> tuple[int, ...]:
+    """The shape of ``array[index]`` for an array of ``shape`` (index: ints and full slices)."""
+    return tuple(n for n, i in zip(shape, index, strict=True) if isinstance(i, slice))
 
 
 def _pick_channel(array: np.ndarray, axes: str, channel: int | None, path: Path) -> np.ndarray:
-    """Drop singleton axes; select ``channel`` along a sample/channel axis."""
-    keep = kept_axes(axes, array.shape)
-    array = array.reshape([n for a, n in zip(axes, array.shape, strict=True) if a in keep])
-    axes = "".join(keep)
-    ax = next((i for i, a in enumerate(axes) if a in "CS"), None)
-    array = select_channel(array, ax, channel, path, "channels (RGB or multi-channel)")
-    if ax is not None:
-        axes = axes[:ax] + axes[ax + 1 :]
-    if array.ndim not in (2, 3):
-        raise VolumeError(
-            f"{path}: a TIFF with axes {axes} is not a 2D or 3D scalar image "
-            "(time series and multi-series files are not supported)"
-        )
-    return array
+    """Drop singleton axes; select ``channel`` along a sample/channel axis (a C-ordered copy
+    only when that selection leaves the samples strided)."""
+    index, _ = _selection(axes, array.shape, channel, path)
+    return np.ascontiguousarray(array[index])
 
 
-def _stack_slices(files: list[Path], channel: int | None) -> np.ndarray:
-    """Read single-image files into one (Z, Y, X) array, checking they match."""
+def _page_grid(tif, series, index: tuple, spec: str) -> TiffStackGrid | None:
+    """A grid reading one page per z-layer of ``series``, or None when its layers are not pages.
+
+    tifffile's series array is its pages stacked in order, reshaped to
+    ``series.shape``: the leading axes number the pages (C order), the
+    trailing ones are one page's. The z axis must be one of the leading ones
+    (always, but for volumetric tiles); a channel axis may be either.
+    """
+    shape = tuple(series.shape)
+    per_page = math.prod(series.keyframe.shape)
+    split = next((q for q in range(len(shape), -1, -1) if math.prod(shape[q:]) == per_page), None)
+    if split is None or series.transform is not None:
+        return None
+    if math.prod(shape[:split]) != len(series):
+        return None  # e.g. a truncated ImageJ file: one page header for many images
+    lead, inpage = index[:split], index[split:]
+    if sum(isinstance(i, slice) for i in lead) != 1:
+        return None  # z inside a page (volumetric tiles)
+    positions = np.arange(len(series)).reshape(shape[:split])[lead]
+    pages = [series[int(j)].index for j in positions]
+    if not all(isinstance(p, int) for p in pages):
+        return None  # pages in SubIFDs
+    ny, nx = _sliced(shape[split:], inpage)
+    return TiffStackGrid(
+        spec,
+        [tif.filehandle.path],
+        (nx, ny, len(pages)),
+        series.dtype,
+        pages=pages,
+        page_shape=shape[split:],
+        inpage=inpage,
+    )
+
+
+def _slice_stack(files: list[Path], channel: int | None, spec: str) -> TiffStackGrid:
+    """A grid of single-image files, one z-layer each, after checking from their headers
+    that they are 2D images of one shape and type."""
     import tifffile
 
     first = None
-    out = None
-    for z, f in enumerate(files):
+    for f in files:
         with tifffile.TiffFile(f) as tif:
             series = tif.series[0]
-            img = _pick_channel(series.asarray(), series.axes, channel, f)
-        if img.ndim != 2:
-            raise VolumeError(
-                f"{f}: a slice of a stack must be one 2D image, got shape {img.shape}"
-            )
+            index, _ = _selection(series.axes, series.shape, channel, f)
+            shape = _sliced(series.shape, index)
+            dtype = series.dtype
+        if len(shape) != 2:
+            raise VolumeError(f"{f}: a slice of a stack must be one 2D image, got shape {shape}")
         if first is None:
-            first = (f, img.shape, img.dtype)
-            check_fits(len(files) * img.nbytes, f"{len(files)} slices like {f.name}", str(f))
-            out = np.empty((len(files),) + img.shape, dtype=img.dtype)
-        elif (img.shape, img.dtype) != first[1:]:
+            first = (f, shape, dtype)
+        elif (shape, dtype) != first[1:]:
             raise VolumeError(
-                f"{f}: slice is {img.shape[1]}x{img.shape[0]} {img.dtype}, but {first[0].name} "
+                f"{f}: slice is {shape[1]}x{shape[0]} {dtype}, but {first[0].name} "
                 f"is {first[1][1]}x{first[1][0]} {first[2]}; all slices must match"
             )
-        out[z] = img
-    return out
+    ny, nx = first[1]
+    return TiffStackGrid(spec, files, (nx, ny, len(files)), first[2], channel=channel)
+
+
+class TiffStackGrid(LazyGrid):
+    """A 3D stack of TIFF images read a z-layer (a page, or a file) at a time.
+
+    Either one file per layer (a folder or glob of single-image slices: each
+    file's first series, ``channel`` taken), or one page per layer of a
+    multi-page file (``pages``: the page of each layer, the image taken from
+    it by ``inpage``). Holds names and numbers only, and opens the files on
+    each read: it pickles, and threads may read slabs at once.
+
+    Parameters
+    ----------
+    path : str or Path
+        The input as given (a file, folder or glob), for messages.
+    files : sequence of Path
+        The slice files, one per layer; or the one multi-page file.
+    shape : (3,) tuple of int
+        (X, Y, Z).
+    dtype : numpy dtype
+        Of the images (bool is read as uint8).
+    channel : int or None
+        Slice files: the channel to take, as the user chose it.
+    pages : sequence of int or None
+        A multi-page file: index in the file of each layer's page.
+    page_shape : tuple of int
+        A multi-page file: the shape a page's image is reshaped to (the
+        trailing axes of the series).
+    inpage : tuple of int or slice
+        A multi-page file: the index taking the (Y, X) image out of the
+        reshaped page (its singleton and channel axes).
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        files: Sequence[Path],
+        shape: tuple[int, int, int],
+        dtype: np.dtype,
+        *,
+        channel: int | None = None,
+        pages: Sequence[int] | None = None,
+        page_shape: tuple[int, ...] = (),
+        inpage: tuple = (),
+    ):
+        self.path = Path(path)
+        self.files = [Path(f) for f in files]
+        self.shape = tuple(int(n) for n in shape)
+        # bool images are contoured as 0/1 bytes, as the whole-file path does
+        self.dtype = np.dtype(np.uint8) if np.dtype(dtype) == np.bool_ else np.dtype(dtype)
+        self.channel = channel
+        self.pages = None if pages is None else [int(p) for p in pages]
+        self.page_shape = tuple(page_shape)
+        self.inpage = tuple(inpage)
+
+    def read_zyx(self, k0: int, k1: int) -> np.ndarray:
+        import tifffile
+
+        out = self._empty_slab(k0, k1)
+        if self.pages is not None:
+            with _readable(self.files[0]), tifffile.TiffFile(self.files[0]) as tif:
+                for z, page in enumerate(self.pages[k0:k1]):
+                    image = tif.pages[page].asarray().reshape(self.page_shape)[self.inpage]
+                    self._put(out, z, image, self.files[0], f"page {page + 1}")
+        else:
+            for z, f in enumerate(self.files[k0:k1]):
+                with _readable(f), tifffile.TiffFile(f) as tif:
+                    series = tif.series[0]
+                    image = _pick_channel(series.asarray(), series.axes, self.channel, f)
+                self._put(out, z, image, f, "the slice")
+        return out
+
+    def _put(self, out: np.ndarray, z: int, image: np.ndarray, path: Path, what: str) -> None:
+        if image.dtype == np.bool_:
+            image = image.view(np.uint8)
+        if image.shape != out.shape[1:] or image.dtype != out.dtype:
+            raise FormatError(
+                f"{path}: {what} is now {image.shape[-1]}x{image.shape[0]} {image.dtype}, not "
+                f"{out.shape[2]}x{out.shape[1]} {out.dtype} as when the stack was opened; read it "
+                "again"
+            )
+        out[z] = image
 
 
 def _spacing(tif, ndim: int) -> tuple[np.ndarray | None, str | None, list[str]]:
