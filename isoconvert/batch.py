@@ -24,7 +24,7 @@ from .convert import ConvertOptions
 from .errors import InputNotFoundError, IsoconvertError, OutputError
 from .quiet import silence_third_party
 from .readers import READERS, unsupported_format
-from .readers.stacks import TIFF_SUFFIXES, natural_key
+from .readers.stacks import TIFF_SUFFIXES, is_zarr_store, natural_key
 
 #: Bytes of working memory a conversion needs per byte of samples (a native-order
 #: or NaN-free copy at most, vertex and triangle arrays, the writer's records),
@@ -145,6 +145,8 @@ def discover(
         path = Path(spec)
         if path.is_file():
             _add_files([path], path.parent, found, skipped, images)
+        elif is_zarr_store(path):
+            found.append(_zarr_found(path, path.parent))
         elif path.is_dir():
             _walk(path, recursive, excluded, found, skipped, images)
         elif globlib.has_magic(spec):
@@ -157,7 +159,9 @@ def discover(
             root = Path(os.path.commonpath([str(Path(m).parent) for m in matches]))
             _add_files(files, root, found, skipped, images)
             for m in matches:
-                if Path(m).is_dir():
+                if is_zarr_store(Path(m)):
+                    found.append(_zarr_found(Path(m), root))
+                elif Path(m).is_dir():
                     _walk(Path(m), recursive, excluded, found, skipped, images)
         else:
             raise InputNotFoundError(f"{spec}: no such file, folder or pattern")
@@ -233,6 +237,10 @@ def _walk(root: Path, recursive: bool, excluded, found, skipped, images: bool) -
             continue
         seen.add(real)
         dirs.sort(key=lambda d: natural_key(Path(d)))
+        stores = [d for d in dirs if is_zarr_store(Path(folder) / d)]
+        for d in stores:  # a Zarr store is one volume, whatever depth: never searched
+            found.append(_zarr_found(Path(folder) / d, root))
+        dirs[:] = [d for d in dirs if d not in stores]
         if not recursive:
             dirs[:] = []
         paths = sorted((Path(folder) / f for f in files), key=natural_key)
@@ -243,6 +251,14 @@ def _walk(root: Path, recursive: bool, excluded, found, skipped, images: bool) -
             found.append(Found(folder, name, sum(p.stat().st_size for p in stack)))
             paths = [p for p in paths if p not in stack]
         _add_files(paths, root, found, skipped, images)
+
+
+def _zarr_found(store: Path, root: Path) -> Found:
+    """A Zarr store as one volume, named by its path under ``root`` (without
+    the ``.zarr`` suffix), its size that of its files."""
+    rel = store.relative_to(root) if store.is_relative_to(root) else Path(store.name)
+    size = sum(f.stat().st_size for f in store.rglob("*") if f.is_file())
+    return Found(str(store), rel.with_suffix("") if rel.suffix == ".zarr" else rel, size)
 
 
 def _tiff_stack(paths: list[Path]) -> list[Path]:
@@ -389,7 +405,17 @@ def _sample_bytes(path: Path) -> int:
 
 # --- levels and per-file options ------------------------------------------------------------
 
-_OPTION_KEYS = ("shape", "dtype", "endian", "header_bytes", "channel", "spacing", "origin", "flip")
+_OPTION_KEYS = (
+    "shape",
+    "dtype",
+    "endian",
+    "header_bytes",
+    "channel",
+    "spacing",
+    "origin",
+    "flip",
+    "scale",
+)
 
 
 @dataclass
@@ -458,7 +484,7 @@ def _parse_option(key: str, value, path: Path, n: int):
             )
             kind = int if key == "shape" else float
             return tuple(kind(p) for p in parts)
-        if key in ("header_bytes", "channel"):
+        if key in ("header_bytes", "channel", "scale"):
             return int(value)
         if key == "level":
             return float(value)
@@ -657,10 +683,16 @@ class BatchSettings:
         mapping or the raw layout) are applied on top.
     require : tuple of str
         Checks each mesh must pass (``--require``).
+    scheduler : str or None
+        A Dask scheduler address (``tcp://host:8786``): each file is converted
+        by a task on that cluster (:func:`isoconvert.distributed.run_on_cluster`),
+        whose workers must see the inputs and the output folder at the same
+        paths. None runs here, in worker processes.
     """
 
     options: ConvertOptions = field(default_factory=ConvertOptions)
     require: tuple[str, ...] = ()
+    scheduler: str | None = None
 
 
 def run_one(job: Job, settings: BatchSettings) -> Outcome:
@@ -736,7 +768,15 @@ def run_jobs(
     Output sub-folders are created as jobs start; those left empty by failed
     jobs are removed (with worker processes, by this process, once no running
     job writes there). Worker processes run :func:`silence_third_party` first.
+
+    With ``settings.scheduler`` set, the jobs run on that Dask cluster instead
+    (:func:`isoconvert.distributed.run_on_cluster`; ``workers`` and
+    ``max_memory`` are then the cluster's business).
     """
+    if settings.scheduler:
+        from .distributed import run_on_cluster
+
+        return run_on_cluster(settings.scheduler, jobs, settings, on_done)
     outcomes: list[Outcome] = []
 
     def done(outcome: Outcome) -> None:

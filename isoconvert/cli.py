@@ -138,9 +138,34 @@ AllowOutsideOpt = Annotated[
         rich_help_panel="Input",
     ),
 ]
+ScaleOpt = Annotated[
+    int,
+    typer.Option(
+        help="OME-Zarr: resolution level to read (0 = full resolution).",
+        rich_help_panel="Input",
+    ),
+]
+MissingChunksOpt = Annotated[
+    bool,
+    _flag(
+        "--allow-missing-chunks",
+        help="Zarr: read chunks missing from the store as the fill value (stores whose "
+        "writer skips empty chunks; else a missing chunk is an error).",
+        rich_help_panel="Input",
+    ),
+]
 OriginOpt = Annotated[
     str | None,
     typer.Option(help="Override the origin: x y (z).", rich_help_panel="Input"),
+]
+
+SchedulerOpt = Annotated[
+    str | None,
+    typer.Option(
+        help="Run on a Dask cluster: its scheduler's address, e.g. tcp://host:8786 "
+        "(default: $DASK_SCHEDULER_ADDRESS; none: here). Needs isoconvert\\[dask].",
+        rich_help_panel="Large volumes",
+    ),
 ]
 
 
@@ -236,6 +261,8 @@ def _read_kwargs(
     spacing,
     origin,
     allow_outside_data=False,
+    scale=0,
+    allow_missing_chunks=False,
 ):
     kwargs = {
         "input_format": input_format,
@@ -249,6 +276,8 @@ def _read_kwargs(
         "header_bytes": header_bytes,
         "channel": channel,
         "allow_outside_data": allow_outside_data or None,
+        "scale": scale or None,
+        "allow_missing_chunks": allow_missing_chunks or None,
     }
     kwargs.update({k: v for k, v in opts.items() if v is not None})
     return kwargs
@@ -341,6 +370,25 @@ def convert(
     spacing: SpacingOpt = None,
     origin: OriginOpt = None,
     allow_outside_data: AllowOutsideOpt = False,
+    scale: ScaleOpt = 0,
+    allow_missing_chunks: MissingChunksOpt = False,
+    block_size: Annotated[
+        int | None,
+        typer.Option(
+            help="Extract block-wise, this many z-layers per block (default: as "
+            "--max-memory allows, and only for volumes larger than it).",
+            rich_help_panel="Large volumes",
+        ),
+    ] = None,
+    max_memory: Annotated[
+        str | None,
+        typer.Option(
+            help="Memory for samples at once, e.g. 2G (default 1G): a volume read from its "
+            "file that is larger is extracted block-wise.",
+            rich_help_panel="Large volumes",
+        ),
+    ] = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
     _quiet_third_party()
@@ -366,6 +414,7 @@ def convert(
             axis=axis.value if axis else None,
             vertex_offset=_vertex_offset(no_degenerate, exact_placement),
             nan_as=nan_as,
+            blocks=_blocks(block_size, max_memory, scheduler),
             on_status=on_status,
             on_progress=on_progress,
             **_read_kwargs(
@@ -378,6 +427,8 @@ def convert(
                 spacing,
                 origin,
                 allow_outside_data,
+                scale,
+                allow_missing_chunks,
             ),
         )
     if not quiet:
@@ -527,6 +578,7 @@ def batch(
     header_bytes: HeaderBytesOpt = 0,
     spacing: SpacingOpt = None,
     allow_outside_data: AllowOutsideOpt = False,
+    allow_missing_chunks: MissingChunksOpt = False,
     images: Annotated[
         bool,
         _flag(
@@ -535,6 +587,7 @@ def batch(
             "(implied by --method squares).",
         ),
     ] = False,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """Convert many volumes: files, folders (--recursive) and globs, in parallel."""
     _quiet_third_party()
@@ -563,6 +616,8 @@ def batch(
     common = {"spacing": _numbers(spacing, "--spacing")} if spacing else {}
     if allow_outside_data:
         common["allow_outside_data"] = True
+    if allow_missing_chunks:
+        common["allow_missing_chunks"] = True
     raw = {
         "shape": _numbers(shape, "--shape", int),
         "dtype": dtype,
@@ -583,7 +638,10 @@ def batch(
     for item in skipped:
         outcomes.append(batching.Outcome(item.path, "", "skipped", message=item.reason))
     from .convert import ConvertOptions
+    from .distributed import scheduler_address
+    from .extract.blocks import Blocks
 
+    workers = batching.check_jobs(jobs, files=len(work))
     settings = batching.BatchSettings(
         ConvertOptions(
             format=writer.name,
@@ -591,10 +649,12 @@ def batch(
             flip=flip,
             method=method,
             vertex_offset=_vertex_offset(no_degenerate, exact_placement),
+            # the files running at once share the budget
+            blocks=Blocks(max_memory=max(1, budget // workers) if budget else None),
         ),
         tuple(required),
+        scheduler=scheduler_address(scheduler),
     )
-    workers = batching.check_jobs(jobs, files=len(work))
     created = batching.make_folders(out_dir) if work else []
     try:
         with _batch_display(quiet, len(work), verbose) as on_done:
@@ -617,6 +677,18 @@ def batch(
         raise typer.Exit(1)
     if "check-failed" in statuses:
         raise typer.Exit(EXIT_CHECK_FAILED)
+
+
+def _blocks(size: int | None, max_memory: str | None, scheduler: str | None):
+    """The Blocks of --block-size, --max-memory and --scheduler."""
+    from .distributed import scheduler_address
+    from .extract.blocks import Blocks
+
+    return Blocks(
+        size=size,
+        max_memory=_bytes(max_memory) if max_memory else None,
+        scheduler=scheduler_address(scheduler),
+    )
 
 
 def _level(text: str) -> float:
@@ -762,6 +834,8 @@ def info(
     spacing: SpacingOpt = None,
     origin: OriginOpt = None,
     allow_outside_data: AllowOutsideOpt = False,
+    scale: ScaleOpt = 0,
+    allow_missing_chunks: MissingChunksOpt = False,
 ) -> None:
     """Describe a volume (size, spacing, value range, histogram) and suggest isovalues."""
     _quiet_third_party()
@@ -778,6 +852,8 @@ def info(
         spacing,
         origin,
         allow_outside_data,
+        scale,
+        allow_missing_chunks,
     )
     volume = read_volume(input, format=kwargs.pop("input_format"), **kwargs)
     hist = histogram(volume.samples)

@@ -58,6 +58,10 @@ class ConvertOptions:
         Overwrite an existing output.
     blocks : Blocks
         Block-wise extraction: slab size, memory budget, Dask scheduler.
+    source_name : str or None
+        What the mesh records as its source (file headers, reports); None:
+        the input as given. (A cluster worker opens the absolute path but
+        records the user's spelling, as a local run does.)
     """
 
     read: ReadOptions = field(default_factory=ReadOptions)
@@ -74,6 +78,7 @@ class ConvertOptions:
     ascii: bool = False
     force: bool = False
     blocks: Blocks = field(default_factory=Blocks)
+    source_name: str | None = None
 
     def updated(self, **changes) -> ConvertOptions:
         """A copy with ``changes``; names of :class:`ReadOptions` fields go to ``read``.
@@ -169,6 +174,8 @@ def convert(
         origin=opts.origin,
         **{name: getattr(opts.read, name) for name in opts.read.given()},
     )
+    if opts.source_name is not None:
+        volume.source = opts.source_name
     method_options = {} if opts.axis is None else {"axis": opts.axis}
     if opts.vertex_offset is not None:
         method_options["vertex_offset"] = opts.vertex_offset

@@ -20,9 +20,9 @@ def silence_third_party() -> None:
 
     Ignores warnings raised inside numpy, numpy's own warning classes and its
     floating-point RuntimeWarnings (raised at the caller's line), and gives the
-    ``tifffile`` logger a handler that drops everything (not passed on to the
-    root logger). The CLI calls it (unless --debug), and so does every batch worker process.
-    Safe to call more than once.
+    ``tifffile`` and ``distributed`` loggers a handler that drops everything
+    (not passed on to the root logger). The CLI calls it (unless --debug), and
+    so does every batch worker process. Safe to call more than once.
     """
     import numpy as np
 
@@ -33,7 +33,10 @@ def silence_third_party() -> None:
             warnings.filterwarnings("ignore", category=category)
     for message in _NUMPY_MESSAGES:
         warnings.filterwarnings("ignore", message=message, category=RuntimeWarning)
-    log = logging.getLogger("tifffile")
-    if not any(isinstance(h, logging.NullHandler) for h in log.handlers):
-        log.addHandler(logging.NullHandler())
-    log.propagate = False
+    # tifffile's warnings about odd files; a Dask client's about lost connections,
+    # which isoconvert turns into one-line errors itself
+    for name in ("tifffile", "distributed"):
+        log = logging.getLogger(name)
+        if not any(isinstance(h, logging.NullHandler) for h in log.handlers):
+            log.addHandler(logging.NullHandler())
+        log.propagate = False

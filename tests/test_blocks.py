@@ -177,3 +177,159 @@ def test_every_real_scan_blockwise_equals_in_memory(name):
         assert_same_mesh(whole, extract(vol, level, blocks=Blocks(size=layers)))
     tetra = extract(vol, level, method="tetra")
     assert_same_mesh(tetra, extract(vol, level, method="tetra", blocks=Blocks(size=7)))
+
+
+@pytest.fixture(scope="module")
+def raw_volume(tmp_path_factory):
+    """A 4 MiB float32 raw file with a bumpy surface, and its samples."""
+    folder = tmp_path_factory.mktemp("raw")
+    n = 128
+    r = np.arange(n, dtype=np.float32) - (n - 1) / 2
+    z, y, x = np.meshgrid(r[:64], r, r, indexing="ij")
+    zyx = 50 - np.sqrt(x**2 + y**2 + (z + 32) ** 2) + 3 * np.sin(x / 3) * np.cos(y / 4)
+    zyx = zyx.astype(np.float32)
+    path = folder / f"bumps_{n}x{n}x64_float32.raw"
+    zyx.tofile(path)
+    return path, zyx
+
+
+@pytest.mark.parametrize(
+    "fmt, ascii", [("ply", False), ("ply", True), ("obj", False), ("stl", False), ("stl", True)]
+)
+def test_a_mesh_larger_than_the_budget_streams_to_the_same_file(raw_volume, tmp_path, fmt, ascii):
+    """With a budget far below the mesh, the mesh waits for the writer in
+    temporary files and the file is byte for byte the in-memory one."""
+    from isoconvert.convert import convert
+    from isoconvert.extract.blocks import BlockMesh
+
+    path, _ = raw_volume
+    convert(path, tmp_path / f"a.{fmt}", 0.5, ascii=ascii)
+    streamed = convert(
+        path, tmp_path / f"b.{fmt}", 0.5, ascii=ascii, blocks=Blocks(max_memory=1 << 18)
+    )
+    assert isinstance(streamed.mesh, BlockMesh) and streamed.mesh.info["blocks"] > 10
+    assert (tmp_path / f"a.{fmt}").read_bytes() == (tmp_path / f"b.{fmt}").read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"a.{fmt}", f"b.{fmt}"]  # no temporaries
+
+
+def test_a_ply_far_from_the_origin_chooses_double_as_in_memory(raw_volume, tmp_path):
+    """float32 would merge vertices 5e6 units from the origin: the slab-pair
+    check of a streamed mesh decides as the whole-mesh check does."""
+    from isoconvert.convert import convert
+
+    path, _ = raw_volume
+    for name, blocks in (("a.ply", Blocks()), ("b.ply", Blocks(max_memory=1 << 18))):
+        convert(
+            path,
+            tmp_path / name,
+            0.5,
+            origin=(5e6, 0, 0),
+            spacing=(1e-3, 1e-3, 1e-3),
+            blocks=blocks,
+        )
+    data = (tmp_path / "a.ply").read_bytes()
+    assert b"property double x" in data
+    assert data == (tmp_path / "b.ply").read_bytes()
+
+
+def test_the_report_of_a_blockwise_mesh_is_the_in_memory_one(raw_volume, tmp_path):
+    from isoconvert.convert import convert
+    from isoconvert.report import check_mesh
+
+    path, _ = raw_volume
+    reports = []
+    for name, blocks in (
+        ("a.ply", Blocks()),
+        ("b.ply", Blocks(size=3)),
+        ("c.ply", Blocks(max_memory=1 << 18)),
+    ):
+        result = convert(path, tmp_path / name, 0.5, blocks=blocks)
+        report = check_mesh(result.written, grid=result.mesh.info["grid"]).to_dict()
+        reports.append(report)
+    assert reports[0]["counts"]["triangles"] > 1000  # a real report of a real mesh
+    assert reports[1] == reports[0] and reports[2] == reports[0]
+
+
+def test_memory_stays_within_the_budget(tmp_path):
+    """A 256 MiB volume converted with --max-memory 16M: the process's peak
+    resident memory stays under what the same command needs for a 2 MiB
+    volume plus the budget plus 16 MiB, far below the volume."""
+    import subprocess
+    import sys
+
+    def peak_mib(path: str, *extra: str) -> float:
+        code = (
+            "import sys\n"
+            "from isoconvert.cli import main\n"
+            "assert main() == 0\n"
+            # this process's own peak (ru_maxrss would count the parent's, from before exec)
+            "peak = [x for x in open('/proc/self/status') if x.startswith('VmHWM')][0]\n"
+            "print(int(peak.split()[1]) / 1024, file=sys.stderr)\n"
+        )
+        out = tmp_path / "out.ply"
+        out.unlink(missing_ok=True)
+        run = subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                code,
+                "convert",
+                path,
+                "-o",
+                str(out),
+                "--level",
+                "0.5",
+                "--quiet",
+                *extra,
+            ],
+            capture_output=True,
+            text=True,
+        )
+        assert run.returncode == 0, run.stderr
+        assert out.stat().st_size > 100_000  # a real mesh was written
+        return float(run.stderr.strip().splitlines()[-1])
+
+    def volume(name: str, nz: int) -> str:
+        n = 256
+        r = np.arange(n, dtype=np.float32) - (n - 1) / 2
+        yy, xx = np.meshgrid(r, r, indexing="ij")
+        path = tmp_path / f"{name}_{n}x{n}x{nz}_float32.raw"
+        with open(path, "wb") as fh:
+            for k in range(nz):
+                d = np.sqrt(xx**2 + yy**2 + (k - nz / 2) ** 2)
+                fh.write((60 - d).astype(np.float32).tobytes())  # a ball of radius 60
+        return str(path)
+
+    small = peak_mib(volume("small", 8))
+    big = peak_mib(volume("big", 1024), "--max-memory", "16M")
+    assert big < small + 16 + 16, (small, big)
+    assert big < 256, big
+
+
+@pytest.mark.parametrize("layers", [1, 2, 3, 7, 12])
+def test_a_chunked_store_is_decoded_once_per_chunk_row(tmp_path, monkeypatch, layers):
+    """Slabs thinner or thicker than the store's chunks (5 layers deep, not
+    dividing the 23 layers): the mesh is the in-memory one, and each row of
+    chunks is read once."""
+    zarr = pytest.importorskip("zarr")
+    from isoconvert.readers.zarr import ZarrGrid
+
+    rng = np.random.default_rng(9)
+    zyx = rng.random((23, 11, 13)).astype(np.float32)
+    store = zarr.create_array(
+        str(tmp_path / "v.zarr"), shape=zyx.shape, chunks=(5, 7, 9), dtype="f4"
+    )
+    store[:] = zyx
+    reads = []
+    original = ZarrGrid.read_zyx
+
+    def spy(self, k0, k1):
+        reads.append((k0, k1))
+        return original(self, k0, k1)
+
+    monkeypatch.setattr(ZarrGrid, "read_zyx", spy)
+    vol = isoconvert.read_volume(tmp_path / "v.zarr")
+    assert vol.grid.z_chunk == 5
+    blocked = extract(vol, 0.5, blocks=Blocks(size=layers))
+    assert sorted(reads) == [(k, min(k + 5, 23)) for k in range(0, 23, 5)]
+    assert_same_mesh(extract(Volume.from_zyx(zyx), 0.5), blocked)

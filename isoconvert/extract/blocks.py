@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import IsoconvertError, VolumeError
-from ..grid import LazyGrid, grid_slab_zyx
+from ..grid import LazyGrid, SlabReader, grid_slab_zyx
 from ..memory import FileMap
 from ..mesh import Mesh
 from ..methods import NO_DEGENERATE_OFFSET
@@ -55,6 +55,9 @@ BLOCK_METHODS = {"cubes": 3, "tetra": 7, "squares": 3}
 #: The default memory budget for samples in flight (``--max-memory``): a lazy
 #: volume larger than this is extracted block-wise.
 DEFAULT_MAX_MEMORY = 1 << 30
+
+#: Slabs per thread of a Dask cluster, when the budget would make fewer.
+_SLABS_PER_THREAD = 4
 
 #: Copies of a slab alive at once: the one being extracted, its kernel-type or
 #: NaN-free copy, and the next one being read. Slabs get half the budget;
@@ -427,7 +430,8 @@ class MeshSink:
         self._spill_dir = spill_dir
         self._spill_above = spill_above
         self.spilled = False
-        self.starts: list[tuple[int, int]] = []  # (vertex, cell) start of each slab
+        # (first vertex, first cell, vertices on the first layer) of each slab
+        self.starts: list[tuple[int, int, int]] = []
 
     @property
     def counts(self) -> tuple[int, int]:
@@ -461,9 +465,10 @@ class MeshSink:
         ids[:] = result.edge_ids
         cells[:] = result.cells
 
-    def commit(self, n_vertices: int, n_cells: int) -> None:
-        """Keep the first ``n_vertices`` and ``n_cells`` of the last slab's."""
-        self.starts.append(self.counts)
+    def commit(self, n_vertices: int, n_cells: int, first_layer: int = 0) -> None:
+        """Keep the first ``n_vertices`` and ``n_cells`` of the last slab's, of
+        which the first ``first_layer`` vertices lie on its first layer."""
+        self.starts.append((*self.counts, first_layer))
         self._vertices.size += n_vertices
         self._ids.size += n_vertices
         self._cells.size += n_cells
@@ -503,22 +508,24 @@ class BlockMesh(Mesh):
 
     Attributes
     ----------
-    slab_starts : list of (int, int)
-        (first vertex, first cell) of each slab.
+    slab_starts : list of (int, int, int)
+        (first vertex, first cell, vertices on its first layer) of each slab.
     """
 
-    slab_starts: list[tuple[int, int]] = field(default_factory=list)
+    slab_starts: list[tuple[int, int, int]] = field(default_factory=list)
 
     def float32_windows(self):
         """Pieces that together answer "does float32 lose anything?" as the
         whole mesh would, or None when they cannot.
 
-        Yields, per slab, its cells (renumbered from its first vertex) with the
-        vertices of that slab and the next: a cell uses only those. Rounding
-        to float32 can only merge vertices closer than ``sqrt(3) 2**-23 m`` (m
-        the largest coordinate), and vertices of slabs two apart are more than
-        one grid step apart, so every merge and every triangle made degenerate
-        is seen in some piece, when a grid step is longer than that.
+        Yields, per slab, its cells (renumbered from its first vertex) with its
+        vertices and those of the next slab's first layer: a cell uses only
+        those. Rounding to float32 can only merge vertices closer than
+        ``sqrt(3) 2**-23 m`` (m the largest coordinate). A slab's vertices lie
+        below its last layer, the next slab's beyond its first layer lie above
+        the layer after it: more than one grid step apart. So every merge and
+        every triangle made degenerate is seen in some piece, when a grid step
+        is longer than that.
         """
         if not self.slab_starts or not len(self.vertices):
             return None
@@ -532,15 +539,14 @@ class BlockMesh(Mesh):
         step = float(np.linalg.svd(affine, compute_uv=False).min())
         if not step > 4 * np.sqrt(3) * 2.0**-23 * m:
             return None
-        starts = [*self.slab_starts, (len(self.vertices), len(self.cells))]
+        starts = [*self.slab_starts, (len(self.vertices), len(self.cells), 0)]
 
         from ..writers.chunks import release
 
         def pieces():
             for s in range(len(starts) - 1):
-                (v0, c0), (v1, c1) = starts[s], starts[s + 1]
-                v2 = starts[min(s + 2, len(starts) - 1)][0]
-                yield self.vertices[v0:v2], self.cells[c0:c1] - v0
+                (v0, c0, _), (v1, c1, first) = starts[s], starts[s + 1]
+                yield self.vertices[v0 : v1 + first], self.cells[c0:c1] - v0
                 release(self.vertices[max(0, v0 - 1) : v1])
                 release(self.cells[max(0, c0 - 1) : c1])
 
@@ -577,7 +583,7 @@ def stitch_blocks(results: Iterable[BlockResult], sink: MeshSink) -> None:
         vertex_start, cell_start = sink.counts
         if pending is not None:
             _renumber(sink, pending, result.first_ids, vertex_start)
-        sink.commit(result.owned_vertices, result.owned_cells)
+        sink.commit(result.owned_vertices, result.owned_cells, len(result.first_ids))
         pending = _Pending(
             vertex_start,
             result.owned_vertices,
@@ -611,14 +617,23 @@ def _renumber(sink: MeshSink, block: _Pending, following: np.ndarray, following_
 def run_local(
     source: np.ndarray | LazyGrid, jobs: list[BlockJob], allocate: Allocate | None = None
 ) -> Iterator[BlockResult]:
-    """Run ``jobs`` here, in order, reading the next slab while one is extracted."""
+    """Run ``jobs`` here, in order, reading the next slab while one is extracted
+    (a chunked store's chunks are decoded once, see :class:`SlabReader`)."""
     if not jobs:
         return
+    slabs = SlabReader(source)
+
+    def read(job: BlockJob) -> np.ndarray:
+        return slabs.read(*job.read_range)
+
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="isoconvert-read") as reader:
-        ahead = reader.submit(read_block, source, jobs[0])
+        ahead = None
         for i, job in enumerate(jobs):
-            zyx = ahead.result()
-            ahead = reader.submit(read_block, source, jobs[i + 1]) if i + 1 < len(jobs) else None
+            zyx = ahead.result() if ahead is not None else read(job)
+            following = jobs[i + 1] if i + 1 < len(jobs) else None
+            # read ahead, unless that decodes a new chunk row while this one is in use
+            ready = following is not None and slabs.ready(*following.read_range)
+            ahead = reader.submit(read, following) if ready else None
             result = run_block(job, zyx, allocate)
             del zyx
             yield result
@@ -689,9 +704,18 @@ def extract_blocks(
     offset = 0.0 if auto or vertex_offset == 0 else check_vertex_offset(vertex_offset)
     arity = 2 if method == "squares" else 3
     if blocks.scheduler is not None:
-        from ..distributed import dask_runner
+        from ..distributed import cluster_threads, connect, dask_runner
 
-        runner: Runner | None = dask_runner(blocks.scheduler, source, volume.source)
+        runner: Runner | None = dask_runner(
+            blocks.scheduler, source, volume.source, max_bytes=blocks.budget
+        )
+        if blocks.size is None:  # enough slabs to keep every thread of the cluster busy
+            per_thread = -(
+                -volume.shape[2]
+                // (_SLABS_PER_THREAD * max(1, cluster_threads(connect(blocks.scheduler))))
+            )
+            layers = max(1, min(layers, per_thread))
+            ranges = slab_ranges(volume.shape[2], layers)
     else:
         runner = None
     threads = kernel_threads()

@@ -1,0 +1,489 @@
+"""Dask distributed as the engine of block-wise extraction and batch (issue 10).
+
+The meshes made on a cluster are the in-memory ones, bit for bit; failures
+(no scheduler, a worker that dies, an error inside a task) are one-line
+``IsoconvertError``\\ s and leave no output file.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+distributed = pytest.importorskip("distributed")
+
+import cloudpickle  # noqa: E402  (comes with distributed)
+import dask  # noqa: E402
+from conftest import dataset  # noqa: E402
+
+import isoconvert.distributed as dd  # noqa: E402
+from isoconvert import (  # noqa: E402
+    batch,  # noqa: E402
+    extract,
+    read_volume,
+)
+from isoconvert.convert import ConvertOptions, convert  # noqa: E402
+from isoconvert.errors import IsoconvertError, VolumeError  # noqa: E402
+from isoconvert.extract.blocks import Blocks, slab_ranges  # noqa: E402
+from isoconvert.grid import LazyGrid  # noqa: E402
+from isoconvert.volume import Volume  # noqa: E402
+
+# A scheduler serves HTTP (health checks) on port 8787 even without a dashboard,
+# and says so when another one has it.
+pytestmark = pytest.mark.filterwarnings("ignore:Port 8787 is already in use")
+
+# The task wrappers below are sent to workers that cannot import this module.
+cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+
+# --- fixtures ------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """Two single-thread worker processes (with nannies, which restart dead ones).
+
+    One death per task is allowed (Dask's default is three): the tests of dying
+    workers then take two deaths, not four.
+    """
+    from distributed import LocalCluster
+
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
+        local = LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        )
+    yield local
+    dd.close_clients()
+    local.close()
+
+
+@pytest.fixture
+def address(cluster) -> str:
+    """The LocalCluster's address, once both of its workers are up (a test that
+    killed one leaves its nanny restarting it)."""
+    dd.connect(cluster.scheduler_address).wait_for_workers(2, timeout=30)
+    return cluster.scheduler_address
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def dask_processes(tmp_path_factory):
+    """A real ``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1,
+    started in a folder of their own (so relative paths would not work there)."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    home = tmp_path_factory.mktemp("dask-home")
+    env = dict(os.environ)
+    env.pop(dd.SCHEDULER_ENV, None)
+    common = {"cwd": home, "env": env, "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    dask_cli = [sys.executable, "-m", "dask"]
+    processes = [
+        subprocess.Popen(
+            [*dask_cli, "scheduler", "--host", "127.0.0.1", "--port", str(port)]
+            + ["--no-dashboard", "--dashboard-address", "127.0.0.1:0"],  # no port 8787
+            **common,
+        )
+    ]
+    try:
+        for _ in range(2):
+            processes.append(
+                subprocess.Popen(
+                    [*dask_cli, "worker", address, "--nthreads", "1", "--no-dashboard"]
+                    + ["--host", "127.0.0.1"],
+                    **common,
+                )
+            )
+        client = dd.connect(address, timeout=30)
+        client.wait_for_workers(2, timeout=60)
+        yield address
+    finally:
+        dd.close_clients()
+        # the workers first: a worker whose scheduler is gone waits to reconnect
+        for group in (processes[1:], processes[:1]):
+            for p in group:
+                p.terminate()
+            for p in group:
+                try:
+                    p.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait()
+
+
+def _field(shape=(13, 11, 17), seed=0) -> Volume:
+    data = np.random.default_rng(seed).random(shape, dtype=np.float32)
+    return Volume(data, spacing=(0.5, 1.25, 2.0), origin=(-3.0, 1.5, 7.0))
+
+
+def _same(a, b) -> None:
+    assert a.vertices.tobytes() == b.vertices.tobytes()
+    assert np.array_equal(a.cells, b.cells)
+    assert np.array_equal(a.edge_ids, b.edge_ids)
+
+
+def _write_raw(folder: Path, data_xyz: np.ndarray, stem: str = "vol") -> Path:
+    """``data_xyz`` (X, Y, Z) as ``stem_XxYxZ_dtype.raw`` (x fastest)."""
+    dims = "x".join(map(str, data_xyz.shape))
+    path = folder / f"{stem}_{dims}_{data_xyz.dtype.name}.raw"
+    path.write_bytes(np.ascontiguousarray(data_xyz.T).tobytes())
+    return path
+
+
+def _ball_raw(folder: Path, n=(24, 22, 20), stem="ball", radius=7.0) -> Path:
+    x, y, z = np.meshgrid(*(np.arange(k, dtype=float) for k in n), indexing="ij")
+    c = [(k - 1) / 2 for k in n]
+    r = np.sqrt((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2)
+    data = np.clip(200 - 20 * (r - radius), 0, 255).astype(np.uint8)
+    return _write_raw(folder, data, stem)
+
+
+def _with_task(monkeypatch, task) -> list:
+    """Make extract_blocks' runners run ``task`` on the workers; returns the
+    sources the runners were made for."""
+    made = []
+    original = dd.dask_runner
+
+    def runner(address, source, name, task_=None, **kw):
+        made.append(source)
+        return original(address, source, name, task, **kw)
+
+    monkeypatch.setattr(dd, "dask_runner", runner)
+    return made
+
+
+def _cli(*args, env=None, cwd=None) -> subprocess.CompletedProcess:
+    full_env = {**os.environ, **(env or {})}
+    full_env.pop(dd.SCHEDULER_ENV, None)
+    return subprocess.run(
+        [sys.executable, "-m", "isoconvert", *map(str, args)],
+        capture_output=True,
+        text=True,
+        env=full_env,
+        cwd=cwd,
+        timeout=120,
+    )
+
+
+# --- task wrappers (run on the workers) ------------------------------------------------------
+
+
+def _expects(kind, job, samples):
+    """The default task, after checking who read the slab."""
+    if not isinstance(samples, kind):
+        raise AssertionError(f"the task got {type(samples).__name__}, not {kind.__name__}")
+    return dd.extract_slab(job, samples)
+
+
+def _dies_once(marker: str, job, samples):
+    """Kill the worker process the first time any slab runs (the marker file
+    decides); the slab is then run again by another worker."""
+    try:
+        os.close(os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:
+        return dd.extract_slab(job, samples)
+    os._exit(1)
+
+
+def _always_dies(job, samples):
+    os._exit(1)
+
+
+# --- the same mesh on a cluster --------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "method, options",
+    [("cubes", {}), ("tetra", {}), ("squares", {"axis": "z"}), ("squares", {"axis": "x"})],
+    ids=["cubes", "tetra", "squares-z", "squares-x"],
+)
+def test_cluster_mesh_is_the_in_memory_mesh(address, monkeypatch, method, options):
+    volume = _field()
+    reference = extract(volume, 0.5, method=method, **options)
+    sources = _with_task(monkeypatch, functools.partial(_expects, np.ndarray))
+    for size in (1, 3, 5):  # 5 does not divide 17 layers
+        mesh = extract(
+            volume, 0.5, method=method, blocks=Blocks(size=size, scheduler=address), **options
+        )
+        _same(mesh, reference)
+        assert mesh.info["blocks"] == len(slab_ranges(17, size))
+    assert all(isinstance(s, np.ndarray) for s in sources)  # read here, sent with the tasks
+
+
+def test_samples_equal_to_the_level_restart_on_the_cluster(cluster, address, monkeypatch):
+    data = np.random.default_rng(3).integers(0, 5, size=(12, 10, 14)).astype(np.uint8)
+    volume = Volume(data, spacing=(1.0, 0.5, 2.0), origin=(1.0, 2.0, 3.0))
+    reference = extract(volume, 2)
+    calls = []
+    original = dd.dask_runner
+
+    def counting(*args, **kw):
+        run = original(*args, **kw)
+
+        def counted(jobs):
+            calls.append(jobs[0].offset)
+            return run(jobs)
+
+        return counted
+
+    monkeypatch.setattr(dd, "dask_runner", counting)
+    mesh = extract(volume, 2, blocks=Blocks(size=3, scheduler=address))
+    _same(mesh, reference)
+    assert mesh.info.get("vertex_offset") == reference.info.get("vertex_offset")
+    assert calls[0] == 0 and len(calls) == 2 and calls[1] > 0  # restarted with the offset
+    # the slabs of the abandoned first pass were cancelled, not left to run
+    deadline = time.monotonic() + 10
+    while any(str(key).startswith("isoconvert-slab") for key in cluster.scheduler.tasks):
+        assert time.monotonic() < deadline, list(cluster.scheduler.tasks)
+        time.sleep(0.05)
+
+
+def test_workers_read_their_own_slabs_of_a_real_scan(address, monkeypatch):
+    path = dataset("tooth_103x94x161_uint8.raw")
+    monkeypatch.chdir(path.parent)  # a relative path here; the workers' folder is another
+    volume = read_volume(path.name)
+    assert volume.grid is not None and not volume.grid.sequential
+    reference = extract(volume, 90)  # in memory: smaller than the default budget
+    sources = _with_task(monkeypatch, functools.partial(_expects, LazyGrid))
+    mesh = extract(volume, 90, blocks=Blocks(size=40, scheduler=address))
+    _same(mesh, reference)
+    assert mesh.info["blocks"] == 4
+    assert sources and all(isinstance(s, LazyGrid) for s in sources)
+    assert dd._worker_side(volume.grid).path.is_absolute()
+
+
+def _slow_first(job, samples):
+    """The first slab finishes last."""
+    if job.k0 == 0:
+        time.sleep(1.0)
+    return dd.extract_slab(job, samples)
+
+
+def test_results_come_in_order_and_the_window_is_bounded(address, monkeypatch):
+    from isoconvert.extract.blocks import BlockJob
+    from isoconvert.extract.tables import DEFAULT_AMBIGUITY
+
+    volume = _field(shape=(9, 8, 25), seed=6)
+    template = BlockJob(
+        method="cubes",
+        level=0.5,
+        k0=0,
+        k1=0,
+        offset=0.0,
+        ambiguity=DEFAULT_AMBIGUITY,
+        axis="z",
+        reverse=False,
+        nan_as=None,
+        affine=np.eye(3),
+        origin=np.zeros(3),
+        grid_shape=volume.shape,
+        threads=1,
+        source="field",
+    )
+    jobs = [replace(template, k0=k0, k1=k1) for k0, k1 in slab_ranges(25, 2)]
+    submitted = []
+    submit = dd._submit
+
+    def counting(client, run, job, samples, token):
+        submitted.append(job.k0)
+        return submit(client, run, job, samples, token)
+
+    monkeypatch.setattr(dd, "_submit", counting)
+    for max_bytes, window in ((None, 4), (1, 2)):  # 2 threads; 1 byte: two slabs at most
+        submitted.clear()
+        runner = dd.dask_runner(address, volume.samples, "field", _slow_first, max_bytes=max_bytes)
+        order = []
+        for n, result in enumerate(runner(jobs)):
+            order.append(result.k0)
+            assert len(submitted) <= n + window
+        assert order == [job.k0 for job in jobs] == submitted
+
+
+# --- failures ------------------------------------------------------------------------------------
+
+
+def test_an_error_inside_a_task_reaches_the_caller(address):
+    volume = _field(seed=4)
+    volume.data[3, 4, 9] = np.nan
+    with pytest.raises(VolumeError) as here:
+        extract(volume, 0.5, blocks=Blocks(size=4))
+    with pytest.raises(VolumeError) as there:
+        extract(volume, 0.5, blocks=Blocks(size=4, scheduler=address))
+    assert type(there.value) is type(here.value)
+    assert str(there.value) == str(here.value)
+    assert "NaN" in str(there.value) and "\n" not in str(there.value)
+
+
+def test_task_errors_survive_pickling():
+    import pickle
+
+    plain = dd.TaskFailure.of(VolumeError("v.raw: NaN; pass --nan-as"))
+    assert type(plain.error) is VolumeError and str(plain.error) == "v.raw: NaN; pass --nan-as"
+    custom = batch.NoVolumesError(["in"], [])  # its constructor takes other arguments
+    sent = pickle.loads(pickle.dumps(dd.TaskFailure.of(custom)))
+    assert isinstance(sent.error, IsoconvertError) and str(sent.error) == str(custom)
+
+
+def _closed_address() -> str:
+    return f"tcp://127.0.0.1:{_free_port()}"
+
+
+def test_no_scheduler_is_one_line_in_time(monkeypatch):
+    monkeypatch.setenv(dd.TIMEOUT_ENV, "1")
+    address = _closed_address()
+    start = time.perf_counter()
+    with pytest.raises(IsoconvertError) as caught:
+        extract(_field(), 0.5, blocks=Blocks(scheduler=address))
+    assert time.perf_counter() - start < 6
+    message = str(caught.value)
+    assert "\n" not in message and address in message and "dask scheduler" in message
+    with pytest.raises(IsoconvertError, match="not a Dask scheduler address"):
+        dd.connect("nonsense://somewhere", timeout=1)
+    monkeypatch.setenv(dd.TIMEOUT_ENV, "soon")
+    with pytest.raises(IsoconvertError, match=dd.TIMEOUT_ENV):
+        dd.connect(address)
+
+
+def test_a_scheduler_without_workers_is_one_line(monkeypatch, tmp_path):
+    from distributed import LocalCluster
+
+    monkeypatch.setenv(dd.TIMEOUT_ENV, "1")
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as empty:
+        start = time.perf_counter()
+        with pytest.raises(IsoconvertError, match="no worker for 1 s") as caught:
+            extract(_field(), 0.5, blocks=Blocks(size=4, scheduler=empty.scheduler_address))
+        assert time.perf_counter() - start < 8
+        assert "\n" not in str(caught.value) and "dask worker" in str(caught.value)
+        volume = _ball_raw(tmp_path)
+        settings = batch.BatchSettings(scheduler=empty.scheduler_address)
+        jobs = [batch.Job(str(volume), str(tmp_path / "out" / "a.ply"), 100)]
+        (outcome,) = batch.run_jobs(jobs, settings)
+        assert outcome.status == "failed" and "no worker" in outcome.message
+        assert not (tmp_path / "out").exists()  # the folder made for it is gone again
+        dd.close_clients()
+
+
+def test_no_scheduler_cli(tmp_path):
+    volume = _ball_raw(tmp_path)
+    out = tmp_path / "out.ply"
+    run = _cli(
+        "convert",
+        volume,
+        "-o",
+        out,
+        "--level",
+        100,
+        "--scheduler",
+        _closed_address(),
+        env={dd.TIMEOUT_ENV: "1"},
+    )
+    assert run.returncode != 0
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1, run.stderr
+    assert "no Dask scheduler answered" in lines[0] and "Traceback" not in run.stderr
+    assert not out.exists() and run.stdout == ""
+
+
+def test_scheduler_address_option_env():
+    assert dd.scheduler_address("tcp://a:1") == "tcp://a:1"
+    env = os.environ.pop(dd.SCHEDULER_ENV, None)
+    try:
+        assert dd.scheduler_address(None) is None
+        os.environ[dd.SCHEDULER_ENV] = "tcp://b:2"
+        assert dd.scheduler_address(None) == "tcp://b:2"
+        assert dd.scheduler_address("tcp://a:1") == "tcp://a:1"
+    finally:
+        os.environ.pop(dd.SCHEDULER_ENV, None)
+        if env is not None:
+            os.environ[dd.SCHEDULER_ENV] = env
+
+
+# --- a real scheduler and workers, through the CLI and the API ------------------------------
+
+
+def test_cli_convert_on_a_cluster_is_byte_identical(dask_processes, tmp_path):
+    volume = _ball_raw(tmp_path)
+    here = _cli("convert", volume.name, "-o", "b.ply", "--level", 100, cwd=tmp_path)
+    assert here.returncode == 0, here.stderr
+    there = _cli(
+        "convert",
+        volume.name,  # relative: the workers run elsewhere
+        "-o",
+        "a.ply",
+        "--level",
+        100,
+        "--block-size",
+        6,
+        "--scheduler",
+        dask_processes,
+        cwd=tmp_path,
+    )
+    assert there.returncode == 0, there.stderr
+    assert (tmp_path / "a.ply").read_bytes() == (tmp_path / "b.ply").read_bytes()
+
+    api = tmp_path / "c.ply"
+    options = ConvertOptions(blocks=Blocks(size=7, scheduler=dask_processes))
+    convert(volume, api, 100, options)
+    plain = tmp_path / "d.ply"
+    convert(volume, plain, 100)
+    assert api.read_bytes() == plain.read_bytes()
+
+
+def test_batch_on_a_cluster_is_byte_identical(dask_processes, tmp_path):
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    files = [
+        _ball_raw(inputs, n=(16 + i, 18, 14 + 2 * i), stem=f"b{i}", radius=5 + i) for i in range(3)
+    ]
+    here = _cli("batch", *files, "-o", tmp_path / "here", "--level", 100, "--jobs", 1, "-q")
+    assert here.returncode == 0, here.stderr
+    there = _cli(
+        "batch", *files, "-o", tmp_path / "there", "--level", 100, "-q",
+        "--scheduler", dask_processes,
+    )  # fmt: skip
+    assert there.returncode == 0, there.stderr
+    names = sorted(p.name for p in (tmp_path / "here").iterdir())
+    assert names == sorted(p.name for p in (tmp_path / "there").iterdir())
+    assert len(names) == 3
+    for name in names:
+        assert (tmp_path / "there" / name).read_bytes() == (tmp_path / "here" / name).read_bytes()
+
+
+# --- workers that die (last: the LocalCluster's nannies restart them) ------------------------
+
+
+def test_a_worker_that_dies_once_changes_nothing(address, monkeypatch, tmp_path):
+    volume = _field(shape=(15, 12, 19), seed=5)
+    reference = extract(volume, 0.5)
+    marker = tmp_path / "died"
+    _with_task(monkeypatch, functools.partial(_dies_once, str(marker)))
+    mesh = extract(volume, 0.5, blocks=Blocks(size=3, scheduler=address))
+    assert marker.exists()  # a worker did die
+    _same(mesh, reference)
+
+
+def test_workers_that_keep_dying_fail_in_one_line(address, monkeypatch, tmp_path):
+    volume = _ball_raw(tmp_path)
+    output = tmp_path / "out.ply"
+    _with_task(monkeypatch, _always_dies)
+    options = ConvertOptions(blocks=Blocks(size=4, scheduler=address))
+    with pytest.raises(IsoconvertError) as caught:
+        convert(volume, output, 100, options)
+    message = str(caught.value)
+    assert "\n" not in message
+    assert "worker died while extracting z-layers" in message and "nothing was written" in message
+    assert not output.exists()
+    assert list(tmp_path.iterdir()) == [volume]
