@@ -37,9 +37,9 @@ _PUBLIC = {
 
 if TYPE_CHECKING:
     from .convert import ConvertOptions, ConvertResult, convert
-    from .extract.blocks import Blocks
     from .errors import IsoconvertError
     from .extract import EXTRACTORS, extract
+    from .extract.blocks import Blocks
     from .mesh import Mesh
     from .readers import READERS, ReadOptions, read_volume
     from .report import check_mesh
