@@ -26,6 +26,35 @@ def dataset(name: str) -> Path:
     return path
 
 
+def real_scan_names() -> list:
+    """Names of the shared datasets' volumes isoconvert reads (for parametrize);
+    one skipped case when the datasets are absent."""
+    if not DATASETS.is_dir():
+        return [pytest.param(None, marks=pytest.mark.skip(reason=f"no datasets at {DATASETS}"))]
+    return [
+        p.name
+        for p in sorted(DATASETS.iterdir())
+        if p.suffix in (".raw", ".nrrd", ".tif") or p.name == "headsq_vtk"
+    ]
+
+
+def read_real_scan(name: str):
+    """The 3D volume of a shared dataset, or skip (a format not read yet, a 2D image)."""
+    from isoconvert import read_volume
+    from isoconvert.errors import IsoconvertError
+
+    path = DATASETS / name
+    if path.is_dir():
+        path = next(path.glob("*.nhdr"))
+    try:
+        vol = read_volume(path)
+    except IsoconvertError as err:
+        pytest.skip(f"not read yet: {err}")  # e.g. a raw file that needs its MetaImage header
+    if vol.ndim != 3:
+        pytest.skip("a 2D image")
+    return vol
+
+
 def load_samples_module():
     """The sample_volumes/make_samples.py module (not a package)."""
     spec = importlib.util.spec_from_file_location("make_samples", SAMPLES / "make_samples.py")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import DATASETS
+from conftest import read_real_scan, real_scan_names
 
 import isoconvert
 from isoconvert import Volume, extract
@@ -147,29 +147,11 @@ def test_bad_input_is_refused_as_in_memory():
         extract(Volume.from_zyx(np.eye(3)), 0.5, blocks=Blocks(size=1))
 
 
-def real_scans():
-    if not DATASETS.is_dir():
-        return [pytest.param(None, marks=pytest.mark.skip(reason=f"no datasets at {DATASETS}"))]
-    return [
-        p.name
-        for p in sorted(DATASETS.iterdir())
-        if p.suffix in (".raw", ".nrrd", ".tif") or p.name == "headsq_vtk"
-    ]
-
-
-@pytest.mark.parametrize("name", real_scans())
+@pytest.mark.parametrize("name", real_scan_names())
 def test_every_real_scan_blockwise_equals_in_memory(name):
     from isoconvert.stats import histogram, otsu_level
 
-    path = DATASETS / name
-    if path.is_dir():
-        path = next(path.glob("*.nhdr"))
-    try:
-        vol = isoconvert.read_volume(path)
-    except IsoconvertError as err:
-        pytest.skip(f"not read yet: {err}")
-    if vol.ndim != 3:
-        pytest.skip("a 2D image")
+    vol = read_real_scan(name)
     level = otsu_level(histogram(vol.samples))
     whole = extract(vol, level)
     nz = vol.shape[2]

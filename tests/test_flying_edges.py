@@ -11,9 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import DATASETS, edge_key, vtk_flying_edges
+from conftest import edge_key, read_real_scan, real_scan_names, vtk_flying_edges
 
-import isoconvert
 from isoconvert import Volume, extract
 from isoconvert.errors import IsoconvertError
 from isoconvert.extract.tables import EDGE_AXIS, EDGE_BASE, marching_cubes_table
@@ -199,30 +198,11 @@ def test_levels_beyond_what_the_type_holds_are_compared_exactly(dtype, level):
     assert n.vertices == len(bipolar)
 
 
-def real_scans():
-    """Every scan of the shared datasets that isoconvert reads, with a level."""
-    if not DATASETS.is_dir():
-        return [pytest.param(None, marks=pytest.mark.skip(reason=f"no datasets at {DATASETS}"))]
-    names = []
-    for path in sorted(DATASETS.iterdir()):
-        if path.suffix in (".raw", ".nrrd", ".tif") or path.name == "headsq_vtk":
-            names.append(path.name)
-    return names
-
-
-@pytest.mark.parametrize("name", real_scans())
+@pytest.mark.parametrize("name", real_scan_names())
 def test_every_real_scan_matches_vtk_flying_edges(name):
     from isoconvert.stats import histogram, otsu_level
 
-    path = DATASETS / name
-    if path.is_dir():
-        path = next(path.glob("*.nhdr"))
-    try:
-        vol = isoconvert.read_volume(path)
-    except IsoconvertError as err:
-        pytest.skip(f"not read yet: {err}")  # e.g. a raw file that needs its MetaImage header
-    if vol.ndim != 3:
-        pytest.skip("a 2D image")
+    vol = read_real_scan(name)
     zyx = np.ascontiguousarray(vol.data.T)
     level = otsu_level(histogram(vol.data))
     if np.issubdtype(zyx.dtype, np.integer):

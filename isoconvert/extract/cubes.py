@@ -15,7 +15,7 @@ import numpy as np
 
 from ..mesh import Mesh
 from ..volume import Volume
-from .placement import Allocate, kernel_outputs, kernel_placement, mesh_info, reversed_orientation
+from .placement import Allocate, Block, kernel_outputs, mesh_info, reversed_orientation
 from .prepare import prepare
 from .tables import DEFAULT_AMBIGUITY, marching_cubes_table
 
@@ -80,37 +80,17 @@ def marching_cubes(
 
 
 @dataclass(frozen=True)
-class CubesBlock:
-    """Marching Cubes on one block of a grid, with global positions and edge ids.
-
-    A block is a brick of samples (z, y and x ranges) with a one-sample overlap
-    on the high side of each cut; its vertices come out in world units and with
-    the edge ids of the whole grid, so blocks merge by id with no welding.
-    Called on the whole grid (``index_origin`` 0) it gives the whole mesh.
+class CubesBlock(Block):
+    """Marching Cubes on one block of a grid, with global positions and edge ids
+    (:class:`~isoconvert.extract.placement.Block` says where the block goes).
 
     Attributes
     ----------
-    affine : (3, 3) float64
-        Index offsets to world offsets (:attr:`Volume.affine`).
-    origin : (3,) float64
-        World position of the grid's sample (0, 0, 0).
-    grid_shape : (3,) int
-        (X, Y, Z) of the whole grid, for edge ids.
-    offset : float
-        Vertex offset (see :func:`~isoconvert.extract.prepare.resolve_vertex_offset`).
     ambiguity : str
-    reverse : bool
-        Write triangles in reverse orientation.
-    threads : int
+        The rule for ambiguous faces.
     """
 
-    affine: np.ndarray
-    origin: np.ndarray
-    grid_shape: tuple[int, int, int]
-    offset: float = 0.0
     ambiguity: str = DEFAULT_AMBIGUITY
-    reverse: bool = False
-    threads: int = 1
 
     def extract(
         self,
@@ -143,10 +123,16 @@ class CubesBlock:
         counts, table = marching_cubes_table(self.ambiguity)
         n = _native.count_cubes(samples, scan, counts, table, self.threads)
         verts, edge_ids, tris = allocate(n.vertices, n.triangles, 3)
-        where = kernel_placement(
-            self.affine, self.origin, self.grid_shape[:2], self.offset, self.reverse, index_origin
-        )
         _native.fill_cubes(
-            samples, scan, n, counts, table, *where, self.threads, verts, edge_ids, tris
+            samples,
+            scan,
+            n,
+            counts,
+            table,
+            *self.placement(index_origin),
+            self.threads,
+            verts,
+            edge_ids,
+            tris,
         )
         return verts, edge_ids, tris

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -79,6 +80,45 @@ def kernel_placement(
 #: ``allocate(n_vertices, n_cells, arity)`` gives a fill kernel's output arrays
 #: (:func:`kernel_outputs`, or views into a growing mesh, see blocks.py).
 Allocate = Callable[[int, int, int], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class Block:
+    """Where one block of a grid goes: what every method's block extractor
+    (``CubesBlock``, ``TetraBlock``, ``SquaresBlock``) shares.
+
+    A block is a brick of samples (z, y and x ranges) with a one-sample overlap
+    on the high side of each cut; its vertices come out in world units and with
+    the edge ids of the whole grid, so blocks merge by id with no welding.
+    Called on the whole grid (``index_origin`` 0) it gives the whole mesh.
+
+    Attributes
+    ----------
+    affine : (3, 3) float64
+        Index offsets to world offsets (:attr:`Volume.affine`).
+    origin : (3,) float64
+        World position of the grid's sample (0, 0, 0).
+    grid_shape : (3,) int
+        (X, Y, Z) of the whole grid, for edge ids.
+    offset : float
+        Vertex offset (see :func:`~isoconvert.extract.prepare.resolve_vertex_offset`).
+    reverse : bool
+        Write cells in reverse orientation.
+    threads : int
+    """
+
+    affine: np.ndarray
+    origin: np.ndarray
+    grid_shape: tuple[int, int, int]
+    offset: float = 0.0
+    reverse: bool = False
+    threads: int = 1
+
+    def placement(self, index_origin: tuple[int, int, int]) -> tuple:
+        """The fill kernels' placement arguments for a block at ``index_origin``."""
+        return kernel_placement(
+            self.affine, self.origin, self.grid_shape[:2], self.offset, self.reverse, index_origin
+        )
 
 
 def kernel_outputs(

@@ -22,7 +22,7 @@ from ..errors import IsoconvertError
 from ..mesh import Mesh
 from ..methods import SQUARE_AMBIGUITY_RULES
 from ..volume import Volume
-from .placement import Allocate, kernel_outputs, kernel_placement, mesh_info, reversed_orientation
+from .placement import Allocate, Block, kernel_outputs, mesh_info, reversed_orientation
 from .prepare import prepare
 from .tables import DEFAULT_AMBIGUITY, marching_squares_table
 
@@ -117,25 +117,25 @@ def marching_squares(
 
 
 @dataclass(frozen=True)
-class SquaresBlock:
-    """Marching Squares on every slice of one block of a grid.
+class SquaresBlock(Block):
+    """Marching Squares on every slice of one block of a grid
+    (:class:`~isoconvert.extract.placement.Block` says where the block goes;
+    ``affine`` is ``(3, 3)`` and ``origin`` ``(3,)`` also for images, whose
+    plane is z = 0).
 
-    As :class:`~isoconvert.extract.cubes.CubesBlock`, plus ``axis`` (the axis
-    the slices are across) and ``planar`` (a 2D image, given as one slice;
-    its ids are then ``2 * (i + X * j) + axis``). The ambiguity rules are
-    :data:`SQUARE_AMBIGUITY_RULES`. ``affine`` is ``(3, 3)`` and ``origin``
-    ``(3,)`` also for images (their plane is z = 0).
+    Attributes
+    ----------
+    axis : str
+        The axis the slices are across.
+    planar : bool
+        A 2D image, given as one slice; its ids are then ``2 * (i + X * j) + axis``.
+    ambiguity : str
+        One of :data:`SQUARE_AMBIGUITY_RULES`.
     """
 
-    affine: np.ndarray
-    origin: np.ndarray
-    grid_shape: tuple[int, int, int]
     axis: str = "z"
     planar: bool = False
-    offset: float = 0.0
     ambiguity: str = DEFAULT_AMBIGUITY
-    reverse: bool = False
-    threads: int = 1
 
     def extract(
         self,
@@ -154,9 +154,7 @@ class SquaresBlock:
         counts, segments = _square_tables()
         n = _native.count_squares(samples, scan, a, counts, segments, self.threads)
         verts, edge_ids, segs = allocate(n.vertices, n.segments, 2)
-        where = kernel_placement(
-            self.affine, self.origin, self.grid_shape[:2], self.offset, self.reverse, index_origin
-        )
+        where = self.placement(index_origin)
         rule = SQUARE_AMBIGUITY_RULES.index(self.ambiguity)  # as SquareRule in src/squares.hpp
         _native.fill_squares(
             samples,

@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import IsoconvertError
 from ..mesh import Mesh
 from ..volume import Volume
-from .placement import Allocate, kernel_outputs, kernel_placement, mesh_info, reversed_orientation
+from .placement import Allocate, Block, kernel_outputs, mesh_info, reversed_orientation
 from .prepare import prepare
 from .tables import (
     CUBE_TETRAHEDRA,
@@ -76,20 +76,10 @@ def marching_tetrahedra(
 
 
 @dataclass(frozen=True)
-class TetraBlock:
-    """Marching Tetrahedra on one block of a grid, with global positions and edge ids.
-
-    As :class:`~isoconvert.extract.cubes.CubesBlock` (same attributes but
-    ``ambiguity``, which tetrahedra do not have); edge ids are
-    ``7 * (i + X * (j + Y * k)) + direction`` in the whole grid.
-    """
-
-    affine: np.ndarray
-    origin: np.ndarray
-    grid_shape: tuple[int, int, int]
-    offset: float = 0.0
-    reverse: bool = False
-    threads: int = 1
+class TetraBlock(Block):
+    """Marching Tetrahedra on one block of a grid, with global positions and
+    edge ids ``7 * (i + X * (j + Y * k)) + direction`` in the whole grid
+    (:class:`~isoconvert.extract.placement.Block` says where the block goes)."""
 
     def extract(
         self,
@@ -114,8 +104,6 @@ class TetraBlock:
         )
         n = _native.count_tetra(samples, scan, *tables, self.threads)
         verts, edge_ids, tris = allocate(n.vertices, n.triangles, 3)
-        where = kernel_placement(
-            self.affine, self.origin, self.grid_shape[:2], self.offset, self.reverse, index_origin
-        )
+        where = self.placement(index_origin)
         _native.fill_tetra(samples, scan, n, *tables, *where, self.threads, verts, edge_ids, tris)
         return verts, edge_ids, tris
