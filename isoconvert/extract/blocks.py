@@ -52,7 +52,7 @@ from .tables import DEFAULT_AMBIGUITY
 #: Methods that run block-wise, and how many edge directions number their ids.
 BLOCK_METHODS = {"cubes": 3, "tetra": 7, "squares": 3}
 
-#: The default memory budget for samples in flight (``--max-memory``): a lazy
+#: The default memory budget of block-wise extraction (``--max-memory``): a lazy
 #: volume larger than this is extracted block-wise.
 DEFAULT_MAX_MEMORY = 1 << 30
 
@@ -85,7 +85,7 @@ class Blocks:
         None runs them here.
     spill_dir : Path or None
         Where the mesh being built moves (into nameless temporary files) once
-        it is larger than ``max_memory``; None keeps it in memory. A writer
+        it is larger than a quarter of ``max_memory``; None keeps it in memory. A writer
         then streams it to its file (:func:`isoconvert.convert` sets the
         output's folder).
     """
