@@ -23,7 +23,7 @@ distributed = pytest.importorskip("distributed")
 
 import cloudpickle  # noqa: E402  (comes with distributed)
 import dask  # noqa: E402
-from conftest import dataset  # noqa: E402
+from conftest import dataset, read_real_scan, real_scan_names  # noqa: E402
 
 import isoconvert.distributed as dd  # noqa: E402
 from isoconvert import (  # noqa: E402
@@ -249,6 +249,20 @@ def test_samples_equal_to_the_level_restart_on_the_cluster(cluster, address, mon
     while any(str(key).startswith("isoconvert-slab") for key in cluster.scheduler.tasks):
         assert time.monotonic() < deadline, list(cluster.scheduler.tasks)
         time.sleep(0.05)
+
+
+@pytest.mark.parametrize("name", real_scan_names())
+def test_every_real_scan_on_the_cluster_is_the_in_memory_mesh(address, name):
+    """Raw, NRRD (raw and gzip), TIFF and headsq's numbered files, each read as
+    the reader gives it (worker-side or client-side slabs)."""
+    from isoconvert.stats import histogram, otsu_level
+
+    volume = read_real_scan(name)
+    level = otsu_level(histogram(volume.samples))
+    slabs = max(2, volume.shape[2] // 5)  # about five tasks
+    _same(
+        extract(volume, level, blocks=Blocks(size=slabs, scheduler=address)), extract(volume, level)
+    )
 
 
 def test_workers_read_their_own_slabs_of_a_real_scan(address, monkeypatch):
