@@ -154,6 +154,9 @@ def connect(address: str, timeout: float | None = None) -> Client:
         from distributed import Client
     except ImportError:
         raise IsoconvertError(_INSTALL) from None
+    from .quiet import silence_distributed
+
+    silence_distributed()  # its log lines would reach the user's stderr
     wait = connect_timeout() if timeout is None else float(timeout)
     with _clients_lock:
         client = _clients.get(address)
@@ -251,6 +254,11 @@ def _probe(address: str, timeout: float) -> None:
         ) from None
     except (OSError, TimeoutError):
         raise IsoconvertError(_no_answer(address, timeout)) from None
+    except MemoryError:  # another service answered first: its banner read as a frame length
+        raise IsoconvertError(
+            f"{address}: what answers there is not a Dask scheduler; check the address "
+            "(a scheduler prints it when it starts: `dask scheduler`)"
+        ) from None
 
 
 def cluster_threads(client: Client) -> int:
@@ -594,6 +602,7 @@ def _task_result(future, address: str, what: str) -> Any:
         The task was cancelled (scheduler restarted or connection lost), or
         raised an ``IsoconvertError`` (re-raised as is) or ran out of memory.
     """
+    from distributed.comm.core import CommClosedError
     from distributed.scheduler import KilledWorker
 
     try:
@@ -607,7 +616,7 @@ def _task_result(future, address: str, what: str) -> Any:
             f"{what}: a Dask worker ran out of memory; nothing was written. "
             "Give the workers more memory, or lower --block-size"
         ) from None
-    except CancelledError:
+    except (CancelledError, CommClosedError, OSError):
         if future.client.status not in ("running", "closing", "closed"):
             _forget(address)  # reconnecting, or given up: the next call starts afresh
         raise IsoconvertError(

@@ -33,10 +33,27 @@ def silence_third_party() -> None:
             warnings.filterwarnings("ignore", category=category)
     for message in _NUMPY_MESSAGES:
         warnings.filterwarnings("ignore", message=message, category=RuntimeWarning)
-    # tifffile's warnings about odd files; a Dask client's about lost connections,
-    # which isoconvert turns into one-line errors itself
-    for name in ("tifffile", "distributed"):
-        log = logging.getLogger(name)
-        if not any(isinstance(h, logging.NullHandler) for h in log.handlers):
-            log.addHandler(logging.NullHandler())
-        log.propagate = False
+    global _silenced
+    _silenced = True
+    _drop("tifffile")  # its warnings about odd files
+    silence_distributed()
+
+
+#: Whether :func:`silence_third_party` ran in this process.
+_silenced = False
+
+
+def _drop(name: str) -> None:
+    """Give logger ``name`` only a handler that drops everything."""
+    log = logging.getLogger(name)
+    log.handlers[:] = [logging.NullHandler()]
+    log.propagate = False
+
+
+def silence_distributed() -> None:
+    """Drop a Dask client's log lines (lost connections, rescheduled keys: isoconvert
+    turns what matters into one-line errors), when :func:`silence_third_party`
+    ran. Called again once ``distributed`` is imported, which sets up handlers
+    of its own."""
+    if _silenced:
+        _drop("distributed")

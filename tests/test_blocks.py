@@ -102,8 +102,8 @@ def test_surfaces_touching_at_a_point_on_a_block_boundary_are_not_merged():
 
 
 def test_lazy_raw_volume_is_read_slab_by_slab(tmp_path, monkeypatch):
-    """A raw file larger than the budget goes block-wise by itself, reading
-    each slab (with its overlap layer) and never the whole array."""
+    """A raw file goes block-wise by itself, reading each slab (with its
+    overlap layer) and never the whole array."""
     from isoconvert.grid import RawGrid
 
     rng = np.random.default_rng(4)
@@ -315,3 +315,26 @@ def test_a_chunked_store_is_decoded_once_per_chunk_row(tmp_path, monkeypatch, la
     blocked = extract(vol, 0.5, blocks=Blocks(size=layers))
     assert sorted(reads) == [(k, min(k + 5, 23)) for k in range(0, 23, 5)]
     assert_same_mesh(extract(Volume.from_zyx(zyx), 0.5), blocked)
+
+
+def test_a_sample_equal_to_the_level_in_the_first_slab_costs_no_second_pass(monkeypatch):
+    """The first slab chooses the offset and the slabs after it take it: each
+    slab is extracted once."""
+    from isoconvert.extract import blocks
+
+    rng = np.random.default_rng(3)
+    zyx = (rng.random((20, 10, 12)) * 9).astype(np.uint8)
+    zyx[1, 4, 4] = 5
+    runs = []
+    original = blocks.run_block
+
+    def counted(job, samples, allocate=None):
+        runs.append(job.k0)
+        return original(job, samples, allocate)
+
+    monkeypatch.setattr(blocks, "run_block", counted)
+    vol = Volume.from_zyx(zyx)
+    blocked = extract(vol, 5, blocks=Blocks(size=3))
+    assert runs == [k0 for k0, _ in slab_ranges(20, 3)]
+    monkeypatch.setattr(blocks, "run_block", original)
+    assert_same_mesh(extract(vol, 5), blocked)

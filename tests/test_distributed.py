@@ -225,6 +225,8 @@ def test_cluster_mesh_is_the_in_memory_mesh(address, monkeypatch, method, option
 
 def test_samples_equal_to_the_level_restart_on_the_cluster(cluster, address, monkeypatch):
     data = np.random.default_rng(3).integers(0, 5, size=(12, 10, 14)).astype(np.uint8)
+    data[data == 2] = 1
+    data[5, 5, 12] = 2  # the only sample equal to the level, in the last slab (x, y, z)
     volume = Volume(data, spacing=(1.0, 0.5, 2.0), origin=(1.0, 2.0, 3.0))
     reference = extract(volume, 2)
     calls = []
@@ -244,6 +246,12 @@ def test_samples_equal_to_the_level_restart_on_the_cluster(cluster, address, mon
     _same(mesh, reference)
     assert mesh.info.get("vertex_offset") == reference.info.get("vertex_offset")
     assert calls[0] == 0 and len(calls) == 2 and calls[1] > 0  # restarted with the offset
+    # equal samples in every slab: each chooses the offset, no second pass
+    calls.clear()
+    data = np.random.default_rng(3).integers(0, 5, size=(12, 10, 14)).astype(np.uint8)
+    volume = Volume(data)
+    _same(extract(volume, 2, blocks=Blocks(size=3, scheduler=address)), extract(volume, 2))
+    assert len(calls) == 1
     # the slabs of the abandoned first pass were cancelled, not left to run
     deadline = time.monotonic() + 10
     while any(str(key).startswith("isoconvert-slab") for key in cluster.scheduler.tasks):

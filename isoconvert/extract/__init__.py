@@ -145,8 +145,8 @@ def extract(
     blocks : Blocks or None
         Block-wise extraction (:mod:`isoconvert.extract.blocks`): a slab size,
         a memory budget, a Dask scheduler. None (or the defaults) extracts a
-        lazy volume larger than the default budget block-wise and any other
-        volume in memory; the mesh is the same either way.
+        volume read from its file block-wise (plugins excepted) and an array
+        in memory at once; the mesh is the same either way.
     **options
         Method-specific options: ``axis`` (squares on 3D volumes),
         ``vertex_offset`` (built-ins: keep vertices this fraction of their edge
@@ -179,11 +179,12 @@ def extract(
     if isinstance(level, str):
         level = resolve_level(volume, level, on_status)
     blocks = blocks or Blocks()
-    if blocks.wanted(volume):
-        if not extractor.prepared or name not in BLOCK_METHODS:
-            raise IsoconvertError(
-                f"{name} does not run block-wise; use --method {', '.join(BLOCK_METHODS)}"
-            )
+    block_wise = extractor.prepared and name in BLOCK_METHODS
+    if blocks.asked and not block_wise:
+        raise IsoconvertError(
+            f"{name} does not run block-wise; use --method {', '.join(BLOCK_METHODS)}"
+        )
+    if block_wise and blocks.wanted(volume):
         return extract_blocks(
             volume,
             float(level),

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import IsoconvertError, VolumeError
+from ..errors import IsoconvertError
 from ..grid import LazyGrid, SlabReader, grid_slab_zyx
 from ..memory import FileMap
 from ..mesh import Mesh
@@ -45,6 +45,7 @@ from .prepare import (
     check_volume,
     equal_target,
     kernel_type,
+    nonfinite_error,
     resolve_vertex_offset,
 )
 from .tables import DEFAULT_AMBIGUITY
@@ -52,8 +53,7 @@ from .tables import DEFAULT_AMBIGUITY
 #: Methods that run block-wise, and how many edge directions number their ids.
 BLOCK_METHODS = {"cubes": 3, "tetra": 7, "squares": 3}
 
-#: The default memory budget of block-wise extraction (``--max-memory``): a lazy
-#: volume larger than this is extracted block-wise.
+#: The default memory budget of block-wise extraction (``--max-memory``).
 DEFAULT_MAX_MEMORY = 1 << 30
 
 #: Slabs per thread of a Dask cluster, when the budget would make fewer.
@@ -78,8 +78,7 @@ class Blocks:
         Bytes that block-wise extraction may hold at once, beyond the
         program itself: slabs of samples take half, the mesh being built a
         quarter before it moves to ``spill_dir`` (when there is one). None is
-        :data:`DEFAULT_MAX_MEMORY`. A lazy volume larger than this is
-        extracted block-wise.
+        :data:`DEFAULT_MAX_MEMORY`.
     scheduler : str or None
         A Dask scheduler address (``tcp://host:8786``) to run the blocks on;
         None runs them here.
@@ -105,19 +104,24 @@ class Blocks:
     def budget(self) -> int:
         return self.max_memory or DEFAULT_MAX_MEMORY
 
+    @property
+    def asked(self) -> bool:
+        """Whether block-wise extraction was asked for (a size or a scheduler)."""
+        return self.size is not None or self.scheduler is not None
+
     def wanted(self, volume: Volume) -> bool:
         """Whether ``volume`` is to be extracted block-wise: asked for (a size or
-        a scheduler), or a lazy volume larger than the memory budget."""
+        a scheduler), or read from its file (a lazy volume), whatever its size:
+        the mesh, not the volume, may be what outgrows the budget, and a volume
+        that fits is one slab (block-wise costs what the in-memory path does)."""
         if volume.ndim != 3:
-            if self.size is not None or self.scheduler is not None:
+            if self.asked:
                 raise IsoconvertError(
                     f"{volume.source}: a 2D image is contoured in memory; "
                     "drop --block-size and --scheduler"
                 )
             return False
-        if self.size is not None or self.scheduler is not None:
-            return True
-        return volume.grid is not None and volume.grid.nbytes > self.budget
+        return self.asked or volume.grid is not None
 
     def layers(self, shape: tuple[int, int, int], itemsize: int) -> int:
         """z-layers per block: :attr:`size`, or what fits the budget."""
@@ -167,6 +171,8 @@ class BlockJob:
         Kernel threads.
     source : str
         For messages.
+    auto_offset : bool
+        See the attribute's comment.
     """
 
     method: str
@@ -183,6 +189,9 @@ class BlockJob:
     grid_shape: tuple[int, int, int]
     threads: int
     source: str
+    #: the vertex offset is the automatic one: a slab with a sample equal to
+    #: the level takes NO_DEGENERATE_OFFSET instead of ``offset`` 0
+    auto_offset: bool = False
 
     @property
     def last(self) -> bool:
@@ -222,6 +231,8 @@ class BlockResult:
         Range of the slab's samples (after NaN replacement).
     equal : int
         Owned samples equal to the level.
+    offset : float
+        The vertex offset the slab's vertices were placed with.
     """
 
     k0: int
@@ -235,6 +246,7 @@ class BlockResult:
     min: float
     max: float
     equal: int
+    offset: float = 0.0
 
 
 def read_block(source: np.ndarray | LazyGrid, job: BlockJob) -> np.ndarray:
@@ -276,12 +288,14 @@ def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) 
     if rows.nonfinite:
         if job.nan_as is None:
             lo, hi = job.read_range
-            raise VolumeError(
-                f"{job.source}: {rows.nonfinite} samples of z-layers {lo}..{hi - 1} are NaN or "
-                "infinite; pass --nan-as VALUE to treat them as that value"
+            whole = lo == 0 and hi == job.grid_shape[2]
+            raise nonfinite_error(
+                job.source, rows.nonfinite, "" if whole else f" (z {lo}..{hi - 1})"
             )
         zyx = _replace_nonfinite(zyx, rows.nonfinite, job.nan_as, job.source)
         rows = scan(zyx)
+    if job.auto_offset and not job.offset and rows.equal:
+        job = replace(job, offset=NO_DEGENERATE_OFFSET)
     equal = rows.equal
     if equal and not job.last:  # the overlap layer's samples are the next slab's
         equal -= int(np.count_nonzero(zyx[-1] == zyx.dtype.type(equal_to)))
@@ -309,6 +323,7 @@ def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) 
         min=float(rows.min),
         max=float(rows.max),
         equal=int(equal),
+        offset=job.offset,
     )
 
 
@@ -615,10 +630,15 @@ def _renumber(sink: MeshSink, block: _Pending, following: np.ndarray, following_
 
 
 def run_local(
-    source: np.ndarray | LazyGrid, jobs: list[BlockJob], allocate: Allocate | None = None
+    source: np.ndarray | LazyGrid,
+    jobs: list[BlockJob],
+    allocate: Allocate | None = None,
+    adjust: Callable[[BlockJob], BlockJob] | None = None,
 ) -> Iterator[BlockResult]:
     """Run ``jobs`` here, in order, reading the next slab while one is extracted
-    (a chunked store's chunks are decoded once, see :class:`SlabReader`)."""
+    (a chunked store's chunks are decoded once, see :class:`SlabReader`).
+    ``adjust`` may change a job just before it runs (the offset the slabs
+    before it chose)."""
     if not jobs:
         return
     slabs = SlabReader(source)
@@ -634,7 +654,7 @@ def run_local(
             # read ahead, unless that decodes a new chunk row while this one is in use
             ready = following is not None and slabs.ready(*following.read_range)
             ahead = reader.submit(read, following) if ready else None
-            result = run_block(job, zyx, allocate)
+            result = run_block(adjust(job) if adjust else job, zyx, allocate)
             del zyx
             yield result
 
@@ -735,14 +755,17 @@ def extract_blocks(
             grid_shape=tuple(int(n) for n in volume.shape),
             threads=threads,
             source=volume.source,
+            auto_offset=auto and can_equal and not offset,
         )
         jobs = [replace(template, k0=k0, k1=k1) for k0, k1 in ranges]
         out = sink or MeshSink(arity, blocks.spill_dir, blocks.budget // 4)
-        stats = _Stats()
-        results = runner(jobs) if runner else run_local(source, jobs, out.allocate)
-        stop = auto and can_equal and not offset
+        stats = _Stats(offset)
+        if runner:
+            results = runner(jobs)
+        else:  # slabs after the first take the offset it chose
+            results = run_local(source, jobs, out.allocate, stats.adjust)
         try:
-            stitch_blocks(stats.tally(results, stop_on_equal=stop), out)
+            stitch_blocks(stats.tally(results), out)
         except _Restart:
             out.close()
             offset = NO_DEGENERATE_OFFSET
@@ -755,7 +778,7 @@ def extract_blocks(
         break
     check_level(level, ValueRange(stats.min, stats.max, 0), volume.source)
     _, note = resolve_vertex_offset(dtype, level, vertex_offset, stats.equal)
-    info = mesh_info(volume, method, level, flip, offset)
+    info = mesh_info(volume, method, level, flip, stats.offset)
     info["blocks"] = len(ranges)
     mesh = out.mesh(info)
     if method == "squares" and mesh.n_cells == 0:
@@ -766,24 +789,37 @@ def extract_blocks(
 
 
 class _Restart(Exception):
-    """A slab found a sample equal to the level while the offset was still 0."""
+    """A slab chose another vertex offset than the slabs before it."""
 
 
 class _Stats:
-    """Range and equal count over the slabs seen."""
+    """Range, equal count and vertex offset over the slabs seen."""
 
-    def __init__(self) -> None:
+    def __init__(self, offset: float) -> None:
         self.min, self.max, self.equal = np.inf, -np.inf, 0
+        self.offset = offset
+        self.seen = 0
 
-    def tally(self, results: Iterator[BlockResult], stop_on_equal: bool) -> Iterator[BlockResult]:
-        """Pass ``results`` on, counting; with ``stop_on_equal``, raise
-        :class:`_Restart` at the first slab with a sample equal to the level."""
+    def adjust(self, job: BlockJob) -> BlockJob:
+        """``job`` with the offset the slabs so far chose."""
+        if self.seen and self.offset != job.offset:
+            return replace(job, offset=self.offset, auto_offset=False)
+        return job
+
+    def tally(self, results: Iterator[BlockResult]) -> Iterator[BlockResult]:
+        """Pass ``results`` on, counting; raise :class:`_Restart` when a slab
+        placed its vertices with another offset than the slabs before it (a
+        sample equal to the level found late: the mesh must not depend on
+        where that sample lies)."""
         for result in results:
             self.min = min(self.min, result.min)
             self.max = max(self.max, result.max)
             self.equal += result.equal
-            if stop_on_equal and self.equal:
-                raise _Restart
+            if result.offset != self.offset:
+                if self.seen:
+                    raise _Restart
+                self.offset = result.offset  # the first slab chose it: no slab before it
+            self.seen += 1
             yield result
 
 

@@ -135,11 +135,18 @@ def kernel_array(
 def _replace_nonfinite(arr: np.ndarray, count: int, nan_as: float | None, src: str) -> np.ndarray:
     """A copy of ``arr`` with its ``count`` NaN/Inf samples set to ``nan_as`` (None: refuse)."""
     if nan_as is None:
-        raise VolumeError(
-            f"{src}: {count} samples are NaN or infinite; pass --nan-as VALUE "
-            "(nan_as=) to treat them as that value"
-        )
+        raise nonfinite_error(src, count)
     return np.where(np.isfinite(arr), arr, arr.dtype.type(nan_as))
+
+
+def nonfinite_error(src: str, count: int, where: str = "") -> VolumeError:
+    """The error for ``count`` NaN/Inf samples (``where``: of which part of the volume)."""
+    samples = "1 sample" if count == 1 else f"{count:,} samples"
+    verb = "is" if count == 1 else "are"
+    return VolumeError(
+        f"{src}: {samples}{where} {verb} NaN or infinite; pass --nan-as VALUE to treat them as "
+        "that value"
+    )
 
 
 def _narrow_int64(data: np.ndarray, src: str) -> np.ndarray:
