@@ -725,7 +725,7 @@ def _batch_display(quiet: bool, total: int, verbose: bool = False):
     def report_failure(outcome, console=None):
         count[0] += 1
         line = None
-        if outcome.status in ("failed", "check-failed") and not quiet:
+        if outcome.status in ("failed", "check-failed"):  # errors, even with --quiet
             line = f"isoconvert: {outcome.message}"
         elif verbose and not quiet:
             line = (

@@ -342,3 +342,16 @@ def test_table_collapses_many_skipped_files_of_one_kind(tree, tmp_path, capsys):
     # the summary file keeps every file
     files = [f["input"] for f in json.loads(json_summary.read_text())["files"]]
     assert sum(f.endswith(".dcm") for f in files) == 5
+
+
+def test_quiet_batch_still_prints_its_failures(tmp_path, capsys):
+    """--quiet prints only errors: a failed file is one, and says so."""
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    np.zeros((4, 4, 4), dtype=np.uint8).tofile(inputs / "flat_4x4x4_uint8.raw")
+    np.arange(64, dtype=np.uint8).tofile(inputs / "ramp_4x4x4_uint8.raw")
+    code = main(["batch", str(inputs), "-o", str(tmp_path / "out"), "-l", "10.5", "-q", "-j", "1"])
+    out, err = capsys.readouterr()
+    assert code == 1 and out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "flat_4x4x4_uint8.raw" in lines[0] and "constant" in lines[0]

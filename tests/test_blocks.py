@@ -196,11 +196,14 @@ def test_a_mesh_larger_than_the_budget_streams_to_the_same_file(raw_volume, tmp_
 
 def test_a_ply_far_from_the_origin_chooses_double_as_in_memory(raw_volume, tmp_path):
     """float32 would merge vertices 5e6 units from the origin: the slab-pair
-    check of a streamed mesh decides as the whole-mesh check does."""
+    check of a streamed mesh decides as the whole-mesh check does (its note
+    counts the first slab that loses something: "at least")."""
     from isoconvert.convert import convert
 
     path, _ = raw_volume
-    for name, blocks in (("a.ply", Blocks()), ("b.ply", Blocks(max_memory=1 << 18))):
+    notes = {}
+    for name, blocks in (("a.ply", Blocks(size=1000)), ("b.ply", Blocks(max_memory=1 << 18))):
+        notes[name] = []
         convert(
             path,
             tmp_path / name,
@@ -208,10 +211,46 @@ def test_a_ply_far_from_the_origin_chooses_double_as_in_memory(raw_volume, tmp_p
             origin=(5e6, 0, 0),
             spacing=(1e-3, 1e-3, 1e-3),
             blocks=blocks,
+            on_status=notes[name].append,
         )
     data = (tmp_path / "a.ply").read_bytes()
     assert b"property double x" in data
     assert data == (tmp_path / "b.ply").read_bytes()
+    # a grid step (1e-3) shorter than float32's rounding there: checked whole, same note
+    [whole] = [n for n in notes["a.ply"] if "written as double" in n]
+    assert "vertices merge" in whole and notes["b.ply"] == notes["a.ply"]
+
+
+def test_the_slab_by_slab_float32_check_finds_what_the_whole_check_finds(tmp_path):
+    """Samples a hair above the level put vertices of several edges 2e-6 from
+    one grid vertex; 1e4 from the origin float32 merges them. A grid step
+    (1) is far longer than that rounding, so the streamed mesh is checked
+    slab by slab, and chooses double as the whole-mesh check does."""
+    from isoconvert.convert import convert
+
+    zyx = np.zeros((40, 12, 12), dtype=np.float32)
+    for k in (5, 17, 33):
+        zyx[k, 6, 6] = np.float32(0.5) + np.float32(1e-6)
+    path = tmp_path / "hairs_12x12x40_float32.raw"
+    zyx.tofile(path)
+    notes = {}
+    for name, blocks in (("a.ply", Blocks(size=1000)), ("b.ply", Blocks(max_memory=1 << 14))):
+        notes[name] = []
+        result = convert(
+            path,
+            tmp_path / name,
+            0.5,
+            origin=(1e4, 1e4, 1e4),
+            blocks=blocks,
+            on_status=notes[name].append,
+        )
+    assert type(result.mesh).__name__ == "BlockMesh" and result.mesh.float32_windows()
+    data = (tmp_path / "a.ply").read_bytes()
+    assert b"property double x" in data and data == (tmp_path / "b.ply").read_bytes()
+    [whole] = [n for n in notes["a.ply"] if "written as double" in n]
+    [streamed] = [n for n in notes["b.ply"] if "written as double" in n]
+    assert "vertices merge" in whole and "at least" not in whole
+    assert "at least" in streamed and "vertices merge" in streamed
 
 
 def test_the_report_of_a_blockwise_mesh_is_the_in_memory_one(raw_volume, tmp_path):

@@ -572,7 +572,7 @@ def test_zarr_missing_chunk_is_an_error(tmp_path, zyx, monkeypatch):
     (path / "c" / "1" / "0" / "2").unlink()  # z-layers 4..7, y 0..3, x 6
     with pytest.raises(FormatError) as err:
         read_volume(path)  # a small store is checked whole when opened
-    one_line(err.value, f"{path}: chunk 1/0/2 is missing (the store is incomplete)")
+    one_line(err.value, f"{path}: chunk 1/0/2 is missing; if its writer leaves out chunks")
     assert "--allow-missing-chunks" in str(err.value)
     # a big store is checked by the reads: layers of complete chunk rows still read
     monkeypatch.setattr(zarr_reader, "_CHECK_AT_OPEN", 0)
@@ -603,7 +603,7 @@ def test_zarr_v2_missing_chunk(tmp_path, zyx):
     (path / "2.1.0").unlink()
     with pytest.raises(FormatError) as err:
         read_volume(path)
-    one_line(err.value, f"{path}: chunk 2/1/0 is missing (the store is incomplete)")
+    one_line(err.value, f"{path}: chunk 2/1/0 is missing; if its writer leaves out chunks")
 
 
 @needs_zarr

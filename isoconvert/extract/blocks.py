@@ -719,6 +719,15 @@ def extract_blocks(
     dtype = kernel_type(np.empty((0, 0, 0), dtype=volume.dtype), volume.source).dtype
     layers = blocks.layers(volume.shape, dtype.itemsize)
     ranges = slab_ranges(volume.shape[2], layers)
+    grid = volume.grid
+    if grid is not None and grid.z_chunk > 1 and on_status:
+        row = grid.shape[0] * grid.shape[1] * grid.z_chunk * grid.dtype.itemsize
+        if row > blocks.budget // 2:
+            on_status(
+                f"note: {volume.source} stores {grid.z_chunk} z-layers per chunk, so a row of "
+                f"chunks ({row / 2**20:.0f} MiB) is decoded at once, more than --max-memory "
+                "allows for samples"
+            )
     can_equal = equal_target(dtype, level) is not None
     auto = vertex_offset is None
     offset = 0.0 if auto or vertex_offset == 0 else check_vertex_offset(vertex_offset)

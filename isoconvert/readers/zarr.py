@@ -443,9 +443,10 @@ class ZarrGrid(LazyGrid):
                 key = array.metadata.encode_chunk_key(coords)
                 if not os.path.exists(os.path.join(self.path, key)):
                     raise FormatError(
-                        f"{self.path}: chunk {'/'.join(map(str, coords))} is missing (the store "
-                        "is incomplete); copy the store again, or pass --allow-missing-chunks if "
-                        "its writer left out chunks that hold only the fill value"
+                        f"{self.path}: chunk {'/'.join(map(str, coords))} is missing; if its "
+                        "writer leaves out chunks that hold only the fill value (zarr-python 3 "
+                        "does by default), pass --allow-missing-chunks, else the store is "
+                        "incomplete: copy it again"
                     )
             self._checked.add(row)
 

@@ -65,11 +65,13 @@ def _stored(
         vertices = vertices[:0]
     precision = writer.precision
     if precision == "adaptive":
-        loss = _float32_loss(vertices, cells, mesh)
+        loss, whole = _float32_loss(vertices, cells, mesh)
         precision = "float64" if loss.any else "float32"
         if loss.any and on_status:
             on_status(
-                f"note: vertex coordinates written as double: in float32, {loss.describe(kind)}"
+                "note: vertex coordinates written as double: in float32, "
+                + ("" if whole else "at least ")
+                + loss.describe(kind)
             )
     elif precision == "float32":
         loss = float32_loss(vertices, cells)
@@ -95,24 +97,24 @@ def _stored(
     return Mesh(vertices, cells, None, info)
 
 
-def _float32_loss(vertices: np.ndarray, cells: np.ndarray, mesh: Mesh):
+def _float32_loss(vertices: np.ndarray, cells: np.ndarray, mesh: Mesh) -> tuple:
     """:func:`float32_loss` (without counting degenerate cells once anything is
-    lost); for a mesh built block-wise, slab pair by slab pair
+    lost), and whether it counted the whole mesh. A mesh built block-wise that
+    outgrew memory is checked slab by slab
     (:meth:`~isoconvert.extract.blocks.BlockMesh.float32_windows`), with memory
-    of the order of two slabs."""
+    of the order of a slab, up to the first slab that loses something: the
+    answer is the whole mesh's, the counts those of that slab."""
     windows = getattr(mesh, "float32_windows", None)
-    if windows is None or vertices is not mesh.vertices or cells is not mesh.cells:
-        return float32_loss(vertices, cells, count_degenerate=False)
-    parts = windows()
+    parts = None
+    if windows is not None and vertices is mesh.vertices and cells is mesh.cells:
+        parts = windows()
     if parts is None:
-        return float32_loss(vertices, cells, count_degenerate=False)
-    total = Float32Loss()
+        return float32_loss(vertices, cells, count_degenerate=False), True
     for window_vertices, window_cells in parts:
         loss = float32_loss(window_vertices, window_cells, count_degenerate=False)
         if loss.any:
-            return loss  # what is lost somewhere: the answer, as for the whole mesh
-        total = loss
-    return total
+            return loss, False
+    return Float32Loss(), True
 
 
 def stored_mesh(
