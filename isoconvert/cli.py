@@ -437,6 +437,9 @@ def convert(
         mesh = result.mesh
         kind = "triangles" if mesh.is_triangles else "segments"
         kind = f"{kind}, {mesh.info['method']}"
+        slabs = mesh.info.get("blocks", 1)
+        if slabs > 1:
+            kind += f" in {slabs} slabs"
         print(
             f"wrote {result.output}: {mesh.n_vertices:,} vertices, {mesh.n_cells:,} {kind} "
             f"(level {mesh.info['level']:g}, {time.perf_counter() - start:.2f} s)"
