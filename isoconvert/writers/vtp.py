@@ -1,0 +1,176 @@
+"""VTP (VTK XML PolyData), what ParaView opens: binary appended data or ASCII.
+
+Layout of the binary file (``byte_order="LittleEndian"``,
+``header_type="UInt64"``, no compression)::
+
+    <?xml version="1.0"?>
+    <!-- made by isoconvert ... -->            provenance and grid, one comment a line
+    <VTKFile type="PolyData" ...>
+      <PolyData>
+        <FieldData>                             the same lines as a String array
+          <Array type="String" Name="isoconvert" NumberOfTuples="n" format="appended" offset="0"/>
+        </FieldData>
+        <Piece NumberOfPoints="V" NumberOfPolys="C" ...>   (NumberOfLines for segments)
+          <Points> <DataArray type="Float32|Float64" NumberOfComponents="3" .../> </Points>
+          <Polys>  connectivity (Int64), offsets (Int64: 3, 6, 9, ...) </Polys>
+        </Piece>
+      </PolyData>
+      <AppendedData encoding="raw">
+       _[UInt64 byte count][bytes] for each array, in the order above
+      </AppendedData>
+    </VTKFile>
+
+Every byte count follows from V and C, so the header is written first and the
+arrays are streamed block by block after it.
+"""
+
+from __future__ import annotations
+
+from typing import BinaryIO
+
+import numpy as np
+
+from ..mesh import Mesh
+from .chunks import ROWS, row_chunks
+from .header import escape_comment, grid_comment, provenance
+from .text import write_rows
+
+#: Name of the FieldData string array holding the provenance and grid lines.
+FIELD_NAME = "isoconvert"
+
+
+def _lines(mesh: Mesh) -> list[str]:
+    """Provenance and grid record, escaped for an ASCII XML comment (no ``--``);
+    the grid record (JSON of numbers) comes out unchanged."""
+    lines = list(provenance(mesh))
+    grid = grid_comment(mesh.info.get("grid"))
+    if grid is not None:
+        lines.append(grid)
+    return [escape_comment(line, ascii=True, xml=True) for line in lines]
+
+
+def write_vtp(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
+    """Write vertices as ``Points`` and cells as ``Polys`` (triangles) or
+    ``Lines`` (segments), indices Int64.
+
+    Points are Float64 when ``mesh.info["stored_precision"]`` is "float64",
+    else Float32 (rounded here); :func:`isoconvert.write_mesh` decides, as
+    for PLY. An XML comment and a FieldData string array named ``isoconvert``
+    say what made the mesh and record the grid (``isoconvert grid {...}``).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        ``vertices (V, 3)``, ``cells (C, 3)`` or ``(C, 2)``.
+    fh : binary file
+    ascii : bool
+        ``format="ascii"`` DataArrays (17 significant digits for Float64, 9
+        for Float32: the stored values come back exactly) instead of raw
+        appended binary.
+    """
+    double = mesh.info.get("stored_precision") == "float64"
+    verts = mesh.vertices
+    cells = mesh.cells
+    n_points, n_cells = len(verts), len(cells)
+    size = cells.shape[1]
+    section = "Polys" if size == 3 else "Lines"
+    kind = "Float64" if double else "Float32"
+    lines = _lines(mesh)
+    strings = b"".join(line.encode("ascii") + b"\0" for line in lines)
+
+    def array(tag: str, attributes: str, offset: int | None) -> str:
+        where = 'format="ascii">' if offset is None else f'format="appended" offset="{offset}"/>'
+        return f"<{tag} {attributes} {where}"
+
+    # byte sizes of the appended arrays, each after its UInt64 count
+    sizes = [len(strings), n_points * 3 * (8 if double else 4), n_cells * size * 8, n_cells * 8]
+    starts = np.concatenate([[0], np.cumsum(np.asarray(sizes) + 8)[:-1]]).tolist()
+    offsets = [None] * 4 if ascii else starts
+    counts = {"Verts": 0, "Lines": 0, "Strips": 0, "Polys": 0}
+    counts[section] = n_cells
+    piece = " ".join(f'NumberOf{name}="{n}"' for name, n in counts.items())
+    head = [
+        '<?xml version="1.0"?>',
+        *[f"<!-- {line} -->" for line in lines],
+        '<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" header_type="UInt64">',
+        "  <PolyData>",
+        "    <FieldData>",
+        "      "
+        + array(
+            "Array",
+            f'type="String" Name="{FIELD_NAME}" NumberOfTuples="{len(lines)}"',
+            offsets[0],
+        ),
+    ]
+    if ascii:
+        # the string array as the byte codes of its NUL-terminated strings (as VTK writes it)
+        head += ["        " + " ".join(str(b) for b in strings), "      </Array>"]
+    head += [
+        "    </FieldData>",
+        f'    <Piece NumberOfPoints="{n_points}" {piece}>',
+        "      <Points>",
+        "        "
+        + array("DataArray", f'type="{kind}" Name="Points" NumberOfComponents="3"', offsets[1]),
+    ]
+    if not ascii:
+        head += [
+            "      </Points>",
+            f"      <{section}>",
+            "        " + array("DataArray", 'type="Int64" Name="connectivity"', offsets[2]),
+            "        " + array("DataArray", 'type="Int64" Name="offsets"', offsets[3]),
+            f"      </{section}>",
+            "    </Piece>",
+            "  </PolyData>",
+            '  <AppendedData encoding="raw">',
+            "   _",
+        ]
+        fh.write("\n".join(head).encode("ascii"))
+        fh.write(np.uint64(len(strings)).tobytes() + strings)
+        fh.write(np.uint64(sizes[1]).tobytes())
+        for block in row_chunks(verts):
+            fh.write(block.astype("<f8" if double else "<f4", copy=False).tobytes())
+        fh.write(np.uint64(sizes[2]).tobytes())
+        for block in row_chunks(cells):
+            fh.write(block.astype("<i8", copy=False).tobytes())
+        fh.write(np.uint64(sizes[3]).tobytes())
+        for block in _offsets(n_cells, size):
+            fh.write(block.astype("<i8", copy=False).tobytes())
+        fh.write(b"\n  </AppendedData>\n</VTKFile>\n")
+        return
+    fh.write(("\n".join(head) + "\n").encode("ascii"))
+    # 17 significant digits give a double back exactly, 9 a float
+    digits = 17 if double else 9
+    stored = np.float64 if double else np.float32
+    write_rows(fh, verts, f"%.{digits}g %.{digits}g %.{digits}g\n", dtype=stored)
+    tail = [
+        "        </DataArray>",
+        "      </Points>",
+        f"      <{section}>",
+        "        " + array("DataArray", 'type="Int64" Name="connectivity"', None),
+    ]
+    fh.write(("\n".join(tail) + "\n").encode("ascii"))
+    write_rows(fh, cells, " ".join(["%d"] * size) + "\n")
+    fh.write(
+        (
+            "        </DataArray>\n        "
+            + array("DataArray", 'type="Int64" Name="offsets"', None)
+            + "\n"
+        ).encode("ascii")
+    )
+    for block in _offsets(n_cells, size):
+        write_rows(fh, block.reshape(-1, 1), "%d\n")
+    tail = [
+        "        </DataArray>",
+        f"      </{section}>",
+        "    </Piece>",
+        "  </PolyData>",
+        "</VTKFile>",
+    ]
+    fh.write(("\n".join(tail) + "\n").encode("ascii"))
+
+
+def _offsets(n_cells: int, size: int):
+    """Blocks of the cell offsets ``size, 2 size, ..., n_cells size`` (int64)."""
+    for first in range(0, n_cells, ROWS):
+        stop = min(first + ROWS, n_cells)
+        yield np.arange(first + 1, stop + 1, dtype=np.int64) * size
