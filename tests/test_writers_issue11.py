@@ -287,3 +287,27 @@ def test_cli_formats_lists_off_and_vtp(capsys):
     assert main(["formats"]) == 0
     out = capsys.readouterr().out
     assert ".off" in out and ".vtp" in out and "PolyData" in out
+
+
+def test_check_reads_an_off_file_back_as_it_was_stored(tmp_path):
+    """`isoconvert check x.off` sees the mesh the file holds: the stored mesh
+    (vertices to the bit, the cells, the grid record), and the report equals
+    the one of the same mesh written as PLY."""
+    from isoconvert.convert import convert
+    from isoconvert.meshfile import read_mesh
+    from isoconvert.report import check_mesh
+    from isoconvert.writers import stored_mesh
+
+    sphere = SAMPLES / "sphere.nrrd"
+    result = convert(sphere, tmp_path / "s.off", 127.5)
+    back = read_mesh(tmp_path / "s.off")
+    stored = stored_mesh(result.mesh, "off")
+    assert back.vertices.tobytes() == stored.vertices.tobytes()
+    assert np.array_equal(back.cells, stored.cells)
+    assert back.info["grid"] == stored.info["grid"]
+    convert(sphere, tmp_path / "s.ply", 127.5)
+    as_off = check_mesh(back).to_dict()
+    as_ply = check_mesh(read_mesh(tmp_path / "s.ply")).to_dict()
+    for report in (as_off, as_ply):
+        report.pop("source")
+    assert as_off["checks"] == as_ply["checks"] and as_off["topology"] == as_ply["topology"]
