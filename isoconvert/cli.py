@@ -56,8 +56,8 @@ class _Group(_HelpAsFlag, typer.core.TyperGroup):
 app = typer.Typer(
     name="isoconvert",
     cls=_Group,
-    help="Turn scalar volumes and images (raw, NRRD, TIFF, PNG, JPEG) into isosurface meshes "
-    "and contours (PLY, OBJ, STL, SVG), and check meshes.",
+    help="Turn scalar volumes and images (raw, NRRD, TIFF, Zarr, PNG, JPEG) into isosurface meshes "
+    "and contours (PLY, OBJ, OFF, VTP, STL, SVG), and check meshes.",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
@@ -319,7 +319,7 @@ def convert(
             help=f"Output format: {', '.join(WRITERS.names())} (default: from the extension)."
         ),
     ] = None,
-    ascii: Annotated[bool, _flag("--ascii", help="Text PLY/STL instead of binary.")] = False,
+    ascii: Annotated[bool, _flag("--ascii", help="Text PLY/STL/VTP instead of binary.")] = False,
     force: Annotated[bool, _flag("--force", "-f", help="Overwrite the output.")] = False,
     flip: Annotated[
         bool, _flag("--flip", help="Reverse orientation (normals toward higher values).")
@@ -547,7 +547,7 @@ def batch(
         str, typer.Option(help=f"Output format: {', '.join(WRITERS.names())}.")
     ] = "ply",
     method: Annotated[str | None, typer.Option(help="Extraction method (as convert).")] = None,
-    ascii: Annotated[bool, _flag("--ascii", help="Text PLY/STL.")] = False,
+    ascii: Annotated[bool, _flag("--ascii", help="Text PLY/STL/VTP.")] = False,
     flip: Annotated[bool, _flag("--flip", help="Reverse orientation.")] = False,
     no_degenerate: Annotated[
         bool, _flag("--no-degenerate", help="As convert: always keep vertices off samples.")

@@ -53,7 +53,7 @@ class ConvertOptions:
     format : str or None
         Writer name; None takes it from the output suffix.
     ascii : bool
-        Text PLY/STL.
+        Text PLY/STL/VTP.
     force : bool
         Overwrite an existing output.
     blocks : Blocks
