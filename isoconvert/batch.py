@@ -351,6 +351,14 @@ def _is_2d_image(path: Path, reader: str) -> bool:
 
             header = nrrd.read_header(str(path))
             return len(spatial_axes(header.get("kinds"), int(header["dimension"]))) == 2
+        if reader == "numpy":
+            from .readers.numpy import array_ndim
+
+            return array_ndim(path) == 2
+        if reader == "metaimage":
+            from .readers.metaimage import image_ndim
+
+            return image_ndim(path) == 2
     except Exception:  # pynrrd and tifffile raise many kinds on a bad header
         return False
     return False
@@ -415,6 +423,7 @@ _OPTION_KEYS = (
     "origin",
     "flip",
     "scale",
+    "key",
 )
 
 

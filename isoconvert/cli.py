@@ -138,6 +138,14 @@ AllowOutsideOpt = Annotated[
         rich_help_panel="Input",
     ),
 ]
+KeyOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--key",
+        help="NumPy .npz: the array to read (when it holds several).",
+        rich_help_panel="Input",
+    ),
+]
 ScaleOpt = Annotated[
     int,
     typer.Option(
@@ -263,6 +271,7 @@ def _read_kwargs(
     allow_outside_data=False,
     scale=0,
     allow_missing_chunks=False,
+    key=None,
 ):
     kwargs = {
         "input_format": input_format,
@@ -278,6 +287,7 @@ def _read_kwargs(
         "allow_outside_data": allow_outside_data or None,
         "scale": scale or None,
         "allow_missing_chunks": allow_missing_chunks or None,
+        "key": key,
     }
     kwargs.update({k: v for k, v in opts.items() if v is not None})
     return kwargs
@@ -372,6 +382,7 @@ def convert(
     allow_outside_data: AllowOutsideOpt = False,
     scale: ScaleOpt = 0,
     allow_missing_chunks: MissingChunksOpt = False,
+    key: KeyOpt = None,
     block_size: Annotated[
         int | None,
         typer.Option(
@@ -429,6 +440,7 @@ def convert(
                 allow_outside_data,
                 scale,
                 allow_missing_chunks,
+                key,
             ),
         )
     if not quiet:
@@ -839,6 +851,7 @@ def info(
     allow_outside_data: AllowOutsideOpt = False,
     scale: ScaleOpt = 0,
     allow_missing_chunks: MissingChunksOpt = False,
+    key: KeyOpt = None,
 ) -> None:
     """Describe a volume (size, spacing, value range, histogram) and suggest isovalues."""
     _quiet_third_party()
@@ -857,6 +870,7 @@ def info(
         allow_outside_data,
         scale,
         allow_missing_chunks,
+        key,
     )
     volume = read_volume(input, format=kwargs.pop("input_format"), **kwargs)
     hist = histogram(volume.samples)

@@ -139,8 +139,9 @@ def make_bad_inputs(folder: Path) -> dict[str, Case]:
     # issue 8: formats recognised but not read yet
     put("scan.nii.gz", gzip.compress(bytes(352)), says=("NIfTI is not read yet", "NRRD"))
     put("scan.nii", bytes(352), says=("NIfTI is not read yet",))
-    put("head.mhd", b"ObjectType = Image\nNDims = 3\n", says=("MetaImage is not read yet",))
-    put("head.mha", b"ObjectType = Image\nNDims = 3\n", says=("MetaImage is not read yet",))
+    # issue 11: MetaImage is read; a header without its ElementDataFile line is refused
+    put("head.mhd", b"ObjectType = Image\nNDims = 3\n", says=("no ElementDataFile line",))
+    put("head.mha", b"ObjectType = Image\nNDims = 3\n", says=("no ElementDataFile line",))
     dicom = bytes(128) + b"DICM" + bytes(64)
     put("slice.dcm", dicom, says=("DICOM is not read yet",))
     put("IM0001", dicom, says=("DICOM is not read yet",))

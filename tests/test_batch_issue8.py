@@ -312,11 +312,17 @@ def test_the_data_file_of_a_metaimage_header_counts_once(tmp_path):
         assert found == []  # the raw data is not read without its header
         assert [Path(s.path).name for s in skipped] == ["head.mhd"]
         assert skipped[0].reason == expected_reason(folder / "head.mhd")
+        # named on its own, the data file is still a raw file (with --shape/--dtype)
+        found, _ = discover([str(folder / "head.raw")])
+        assert [Path(f.spec).name for f in found] == ["head.raw"]
     else:
         assert [Path(f.spec).name for f in found] == ["head.mhd"]
-    # named on its own, the data file is still a raw file (with --shape/--dtype)
-    found, _ = discover([str(folder / "head.raw")])
-    assert [Path(f.spec).name for f in found] == ["head.raw"]
+        # named on its own, the data file is skipped: its header reads it (as for .nhdr)
+        found, skipped = discover([str(folder / "head.raw")])
+        assert found == []
+        assert [(Path(s.path).name, s.reason) for s in skipped] == [
+            ("head.raw", "the data of head.mhd; convert that header")
+        ]
 
 
 def test_real_dataset_folder_skips_previews_dicom_and_metaimage_data():

@@ -84,6 +84,27 @@ READERS.register(
     ),
 )
 READERS.register(
+    "numpy",
+    Reader(
+        "numpy",
+        "NumPy .npy (memory-mapped; (z, y, x) C order or (x, y, z) Fortran order) or .npz "
+        "(--key picks the array)",
+        (".npy", ".npz"),
+        LazyFunction("isoconvert.readers.numpy:read_numpy"),
+        frozenset({"key"}),
+    ),
+)
+READERS.register(
+    "metaimage",
+    Reader(
+        "metaimage",
+        "MetaImage .mhd (+ raw/zraw data, LIST or numbered files) or .mha (ITK, VTK, Slicer)",
+        (".mhd", ".mha"),
+        LazyFunction("isoconvert.readers.metaimage:read_metaimage"),
+        frozenset({"channel", "allow_outside_data"}),
+    ),
+)
+READERS.register(
     "image",
     Reader(
         "image",
@@ -98,11 +119,11 @@ READERS.register(
 # Formats recognised but not read yet (a later issue): what to call them in messages.
 _NOT_READ_YET = {
     ".nii": "NIfTI",
-    ".mhd": "MetaImage",
-    ".mha": "MetaImage",
     ".dcm": "DICOM",
     ".dicom": "DICOM",
 }
+# Headers that are a whole volume by themselves: a folder holding one is not a TIFF stack.
+_HEADER_SUFFIXES = {".mhd": "MetaImage header", ".mha": "MetaImage file"}
 _TOOLS = "(e.g. with 3D Slicer or SimpleITK)"
 _CONVERT = f"convert it to NRRD first {_TOOLS}"
 _DICOM_CHECKS = 16  # files of a folder looked at for the DICOM magic
@@ -132,9 +153,9 @@ def _kind_not_read(path: Path, look_inside: bool = True) -> str | None:
 def unsupported_format(path: Path) -> str | None:
     """Why ``path`` cannot be read yet, when it is a format isoconvert knows but does not read.
 
-    Recognises NIfTI (``.nii``, ``.nii.gz``), MetaImage (``.mhd``, ``.mha``) and
-    DICOM (``.dcm``, or the "DICM" magic at byte 128 of a file whose suffix no
-    reader claims), and folders of DICOM files. Cheap enough to call on every
+    Recognises NIfTI (``.nii``, ``.nii.gz``) and DICOM (``.dcm``, or the "DICM"
+    magic at byte 128 of a file whose suffix no reader claims), and folders of
+    DICOM files. Cheap enough to call on every
     file of a folder: it reads at most 132 bytes, and only of files whose
     suffix no reader claims.
 
@@ -192,6 +213,13 @@ def _unsupported_folder(folder: Path) -> str | None:
                 "a folder is read as a stack of TIFF slices and this one holds none; "
                 f"it holds {kind} ({p.name}), which is not read yet; {_CONVERT}"
             )
+    headers = [p for p in files if p.suffix.lower() in _HEADER_SUFFIXES]
+    if headers:
+        return (
+            "a folder is read as a stack of TIFF slices and this one holds none; it holds "
+            f"a {_HEADER_SUFFIXES[headers[0].suffix.lower()]} ({headers[0].name}): give that "
+            "file instead"
+        )
     return None
 
 
@@ -239,15 +267,18 @@ def read_volume(
         The input. A folder or glob is a stack of TIFF slices, unless the
         folder is a Zarr store.
     format : str or None
-        Reader name (``raw``, ``nrrd``, ``tiff``, ``zarr``, ``image``); None
+        Reader name (``raw``, ``nrrd``, ``tiff``, ``zarr``, ``numpy``, ``metaimage``,
+        ``image``); None
         guesses from the suffix (see :func:`detect_format`).
     spacing, origin : sequence of float or None
         Override what the file says (x, y[, z]).
     **options
         Fields of :class:`ReadOptions`: ``shape``, ``dtype``, ``endian``,
         ``header_bytes`` (raw), ``channel`` (multi-channel images),
-        ``allow_outside_data`` (detached NRRD data outside the header's folder),
-        ``scale`` (OME-Zarr resolution level), ``allow_missing_chunks`` (Zarr).
+        ``allow_outside_data`` (detached NRRD or MetaImage data outside the
+        header's folder),
+        ``scale`` (OME-Zarr resolution level), ``allow_missing_chunks`` (Zarr),
+        ``key`` (the array of a NumPy ``.npz``).
 
     Raises
     ------

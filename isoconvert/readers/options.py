@@ -29,11 +29,11 @@ class ReadOptions:
     channel : int or None
         Multi-channel (RGB, multi-sample) images: which channel to read.
     allow_outside_data : bool
-        Formats with companion files (a detached NRRD header and its data
-        files): read data files that resolve, after following symlinks, outside
-        the header's folder and its sub-folders. Off by default, so that a
-        header from an untrusted source cannot make the tool read any file on
-        the machine.
+        Formats with companion files (a detached NRRD header or a MetaImage
+        ``.mhd``, and their data files): read data files that resolve, after
+        following symlinks, outside the header's folder and its sub-folders.
+        Off by default, so that a header from an untrusted source cannot make
+        the tool read any file on the machine.
     scale : int
         Multi-resolution inputs (OME-Zarr): the resolution level to read, 0
         being the full resolution.
@@ -42,6 +42,9 @@ class ReadOptions:
         as zarr itself does. Off by default, because a missing chunk usually
         means an incomplete copy; some writers (zarr-python 3 by default) skip
         chunks that hold only the fill value, and their stores need this.
+    key : str or None
+        NumPy ``.npz`` archives holding several arrays: the name of the one to
+        read (not needed when the archive holds one array).
     """
 
     shape: tuple[int, ...] | None = None
@@ -52,6 +55,7 @@ class ReadOptions:
     allow_outside_data: bool = False
     scale: int = 0
     allow_missing_chunks: bool = False
+    key: str | None = None
 
     def given(self) -> set[str]:
         """Names of the options that differ from their defaults."""
