@@ -33,7 +33,7 @@ from ..errors import FormatError, one_line
 from ..grid import RawGrid, read_exactly
 from ..memory import check_fits
 from ..volume import Volume
-from .nrrd import _data_path, _Inflater
+from .nrrd import _data_path, _Inflater, numbered_names
 from .options import ReadOptions, check_channel
 
 _MAX_HEADER = 1 << 20  # bytes of header before ElementDataFile (a LIST's names excluded)
@@ -274,17 +274,7 @@ def _data_names(header: _Header, ndims: int) -> tuple[list[str] | None, int | No
     multi = _PATTERN.match(value)
     if multi:
         fmt, lo, hi, step, sub = multi.groups()
-        lo, hi, step = int(lo), int(hi), int(step)
-        numbers = range(lo, hi + (1 if step > 0 else -1), step) if step else range(0)
-        if not numbers:
-            raise FormatError(f"{path}: ElementDataFile range {lo}..{hi} step {step} is empty")
-        try:
-            names = [fmt % n for n in numbers]
-        except (TypeError, ValueError) as exc:
-            raise FormatError(
-                f"{path}: ElementDataFile pattern {fmt!r} is not a printf pattern for one number "
-                f"({one_line(exc)})"
-            ) from None
+        names = numbered_names(path, "ElementDataFile", fmt, int(lo), int(hi), int(step))
         return names, _subdim(path, sub, ndims)
     return [value], None
 

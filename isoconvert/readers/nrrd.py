@@ -244,22 +244,27 @@ def _data_files(
         multi = _MULTI_FILE.match(value)
         if multi:
             fmt, lo, hi, step, sub = multi.groups()
-            lo, hi, step = int(lo), int(hi), int(step)
-            numbers = range(lo, hi + (1 if step > 0 else -1), step) if step else range(0)
-            if not numbers:
-                raise FormatError(f"{path}: 'data file' range {lo}..{hi} step {step} is empty")
             subdim = _subdim(path, sub, len(sizes))
-            _check_split(path, len(numbers), sizes, subdim)
-            try:
-                names = [fmt % n for n in numbers]
-            except (TypeError, ValueError) as exc:
-                raise FormatError(
-                    f"{path}: 'data file' pattern {fmt!r} is not a printf pattern for one "
-                    f"number ({one_line(exc)})"
-                ) from None
+            names = numbered_names(path, "'data file'", fmt, int(lo), int(hi), int(step))
+            _check_split(path, len(names), sizes, subdim)
         else:
             names, subdim = [value], None
     return [_data_path(path, name, allow_outside, check) for name in names], subdim
+
+
+def numbered_names(path: Path, field: str, fmt: str, lo: int, hi: int, step: int) -> list[str]:
+    """The file names of a numbered data-file pattern (``slice%03d.raw 1 93 1``:
+    NRRD's ``data file``, MetaImage's ``ElementDataFile``), ``hi`` included."""
+    numbers = range(lo, hi + (1 if step > 0 else -1), step) if step else range(0)
+    if not numbers:
+        raise FormatError(f"{path}: {field} range {lo}..{hi} step {step} is empty")
+    try:
+        return [fmt % n for n in numbers]
+    except (TypeError, ValueError) as exc:
+        raise FormatError(
+            f"{path}: {field} pattern {fmt!r} is not a printf pattern for one number "
+            f"({one_line(exc)})"
+        ) from None
 
 
 def _subdim(path: Path, text: str | None, ndim: int) -> int:
