@@ -57,7 +57,7 @@ app = typer.Typer(
     name="isoconvert",
     cls=_Group,
     help="Turn scalar volumes and images (raw, NRRD, TIFF, Zarr, PNG, JPEG) into isosurface meshes "
-    "and contours (PLY, OBJ, OFF, VTP, STL, SVG), and check meshes.",
+    "and contours (PLY, OBJ, OFF, VTP, STL, GLB, 3MF, SVG), and check meshes.",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
