@@ -23,7 +23,7 @@ from pathlib import Path
 from .convert import ConvertOptions
 from .errors import InputNotFoundError, IsoconvertError, OutputError
 from .quiet import silence_third_party
-from .readers import READERS, unsupported_format
+from .readers import READERS, format_suffix, unsupported_format
 from .readers.stacks import TIFF_SUFFIXES, is_zarr_store, natural_key
 
 #: Bytes of working memory a conversion needs per byte of samples (a native-order
@@ -297,11 +297,11 @@ def _add_files(paths: list[Path], root: Path, found, skipped, images: bool = Fal
         if header is not None:
             if header.resolve() in given:
                 continue  # read through its header, or skipped with it
-            if READERS.by_suffix(header.suffix) is not None:
+            if READERS.by_suffix(format_suffix(header)) is not None:
                 skipped.append(Skipped(str(p), f"the data of {header.name}; convert that header"))
                 continue
             # the header's format is not read yet: the file may still be read as raw
-        match = READERS.by_suffix(p.suffix)
+        match = READERS.by_suffix(format_suffix(p))
         if match is None:
             reason = unsupported_format(p)
             if reason and reason.startswith("DICOM"):
@@ -359,6 +359,10 @@ def _is_2d_image(path: Path, reader: str) -> bool:
             from .readers.metaimage import image_ndim
 
             return image_ndim(path) == 2
+        if reader == "nifti":
+            from .readers.nifti import nifti_ndim
+
+            return nifti_ndim(path) == 2
     except Exception:  # pynrrd and tifffile raise many kinds on a bad header
         return False
     return False
@@ -424,6 +428,7 @@ _OPTION_KEYS = (
     "flip",
     "scale",
     "key",
+    "volume_index",
 )
 
 
@@ -533,9 +538,7 @@ def plan(
     out_dir = Path(out_dir)
     base = out_dir.resolve()
     relatives = [_inside(base, f.relative) or _fallback_name(f) for f in found]
-    names = [
-        rel.with_suffix(suffix) if rel.suffix else Path(str(rel) + suffix) for rel in relatives
-    ]
+    names = [_output_name(rel, suffix) for rel in relatives]
     clashes = {n for n in names if names.count(n) > 1}
     taken: set[Path] = set()
     jobs, done = [], []
@@ -547,7 +550,7 @@ def plan(
         output = out_dir / name
         rule = next((r for r in rules or [] if r.matches(f.relative)), None)
         job_level = rule.level if rule and rule.level is not None else level
-        reader = READERS.by_suffix(Path(f.spec).suffix)
+        reader = READERS.by_suffix(format_suffix(f.spec))
         is_raw = reader is not None and reader[0] == "raw"
         job_options = {
             **(options or {}),
@@ -580,6 +583,14 @@ def plan(
         estimate = MEMORY_FACTOR * f.size + MEMORY_BASE
         jobs.append(Job(f.spec, str(output), job_level, job_options, estimate))
     return jobs, done
+
+
+def _output_name(relative: Path, suffix: str) -> Path:
+    """``relative`` with its format's suffix (two parts for ``.nii.gz``) replaced by ``suffix``."""
+    kept = format_suffix(relative)
+    if not relative.suffix:
+        return Path(str(relative) + suffix)
+    return relative.with_name(relative.name[: -len(kept)] + suffix)
 
 
 def _inside(base: Path, relative: Path) -> Path | None:

@@ -146,6 +146,14 @@ KeyOpt = Annotated[
         rich_help_panel="Input",
     ),
 ]
+VolumeIndexOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--volume-index",
+        help="4D NIfTI: the volume to read (0 = the first).",
+        rich_help_panel="Input",
+    ),
+]
 ScaleOpt = Annotated[
     int,
     typer.Option(
@@ -272,6 +280,7 @@ def _read_kwargs(
     scale=0,
     allow_missing_chunks=False,
     key=None,
+    volume_index=None,
 ):
     kwargs = {
         "input_format": input_format,
@@ -288,6 +297,7 @@ def _read_kwargs(
         "scale": scale or None,
         "allow_missing_chunks": allow_missing_chunks or None,
         "key": key,
+        "volume_index": volume_index,
     }
     kwargs.update({k: v for k, v in opts.items() if v is not None})
     return kwargs
@@ -383,6 +393,7 @@ def convert(
     scale: ScaleOpt = 0,
     allow_missing_chunks: MissingChunksOpt = False,
     key: KeyOpt = None,
+    volume_index: VolumeIndexOpt = None,
     block_size: Annotated[
         int | None,
         typer.Option(
@@ -441,6 +452,7 @@ def convert(
                 scale,
                 allow_missing_chunks,
                 key,
+                volume_index,
             ),
         )
     if not quiet:
@@ -852,6 +864,7 @@ def info(
     scale: ScaleOpt = 0,
     allow_missing_chunks: MissingChunksOpt = False,
     key: KeyOpt = None,
+    volume_index: VolumeIndexOpt = None,
 ) -> None:
     """Describe a volume (size, spacing, value range, histogram) and suggest isovalues."""
     _quiet_third_party()
@@ -871,6 +884,7 @@ def info(
         scale,
         allow_missing_chunks,
         key,
+        volume_index,
     )
     volume = read_volume(input, format=kwargs.pop("input_format"), **kwargs)
     hist = histogram(volume.samples)

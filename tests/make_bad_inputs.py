@@ -136,9 +136,9 @@ def make_bad_inputs(folder: Path) -> dict[str, Case]:
         _nrrd_header(encoding="gzip") + gzip.compress(good.tobytes()[:60]),
         says=("holds 60 bytes, fewer than the 96",),
     )
-    # issue 8: formats recognised but not read yet
-    put("scan.nii.gz", gzip.compress(bytes(352)), says=("NIfTI is not read yet", "NRRD"))
-    put("scan.nii", bytes(352), says=("NIfTI is not read yet",))
+    # issue 11: NIfTI is read (through nibabel); a header of zeros is not NIfTI
+    put("scan.nii.gz", gzip.compress(bytes(352)), says=("not a readable NIfTI file",))
+    put("scan.nii", bytes(352), says=("not a readable NIfTI file",))
     # issue 11: MetaImage is read; a header without its ElementDataFile line is refused
     put("head.mhd", b"ObjectType = Image\nNDims = 3\n", says=("no ElementDataFile line",))
     put("head.mha", b"ObjectType = Image\nNDims = 3\n", says=("no ElementDataFile line",))

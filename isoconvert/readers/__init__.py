@@ -105,6 +105,17 @@ READERS.register(
     ),
 )
 READERS.register(
+    "nifti",
+    Reader(
+        "nifti",
+        "NIfTI-1/NIfTI-2 .nii or .nii.gz via nibabel (sform/qform placement, RAS; "
+        "--volume-index picks a volume of a 4D image)",
+        (".nii", ".nii.gz"),
+        LazyFunction("isoconvert.readers.nifti:read_nifti"),
+        frozenset({"volume_index"}),
+    ),
+)
+READERS.register(
     "image",
     Reader(
         "image",
@@ -118,12 +129,33 @@ READERS.register(
 
 # Formats recognised but not read yet (a later issue): what to call them in messages.
 _NOT_READ_YET = {
-    ".nii": "NIfTI",
     ".dcm": "DICOM",
     ".dicom": "DICOM",
 }
-# Headers that are a whole volume by themselves: a folder holding one is not a TIFF stack.
-_HEADER_SUFFIXES = {".mhd": "MetaImage header", ".mha": "MetaImage file"}
+# Files that are a whole volume by themselves: a folder holding one is not a TIFF stack.
+_HEADER_SUFFIXES = {
+    ".mhd": "MetaImage header",
+    ".mha": "MetaImage file",
+    ".nii": "NIfTI file",
+    ".nii.gz": "NIfTI file",
+}
+# Suffixes of two parts that a reader claims (the last part alone means something else).
+_DOUBLE_SUFFIXES = (".nii.gz",)
+
+
+def format_suffix(path: str | Path) -> str:
+    """The suffix that names a file's format, lower-case: ``.nii.gz`` for
+    ``scan.nii.gz`` (not ``.gz``), else the last suffix (``.nrrd``).
+
+    Use it with ``READERS.by_suffix`` instead of ``Path.suffix``.
+    """
+    name = Path(path).name.lower()
+    for double in _DOUBLE_SUFFIXES:
+        if name.endswith(double) and len(name) > len(double):
+            return double
+    return Path(name).suffix
+
+
 _TOOLS = "(e.g. with 3D Slicer or SimpleITK)"
 _CONVERT = f"convert it to NRRD first {_TOOLS}"
 _DICOM_CHECKS = 16  # files of a folder looked at for the DICOM magic
@@ -140,11 +172,8 @@ def _is_dicom(path: Path) -> bool:
 
 
 def _kind_not_read(path: Path, look_inside: bool = True) -> str | None:
-    name = path.name.lower()
-    if name.endswith(".nii.gz"):
-        return "NIfTI"
-    kind = _NOT_READ_YET.get(path.suffix.lower())
-    if kind is None and look_inside and READERS.by_suffix(path.suffix) is None:
+    kind = _NOT_READ_YET.get(format_suffix(path))
+    if kind is None and look_inside and READERS.by_suffix(format_suffix(path)) is None:
         # DICOM files often have no suffix (or a number): only the magic tells
         kind = "DICOM" if _is_dicom(path) else None
     return kind
@@ -153,7 +182,7 @@ def _kind_not_read(path: Path, look_inside: bool = True) -> str | None:
 def unsupported_format(path: Path) -> str | None:
     """Why ``path`` cannot be read yet, when it is a format isoconvert knows but does not read.
 
-    Recognises NIfTI (``.nii``, ``.nii.gz``) and DICOM (``.dcm``, or the "DICM"
+    Recognises DICOM (``.dcm``, or the "DICM"
     magic at byte 128 of a file whose suffix no reader claims), and folders of
     DICOM files. Cheap enough to call on every
     file of a folder: it reads at most 132 bytes, and only of files whose
@@ -199,7 +228,7 @@ def _unsupported_folder(folder: Path) -> str | None:
         return None
     dicom = [p for p in files if _kind_not_read(p, look_inside=False) == "DICOM"]
     if not dicom:
-        unknown = [p for p in files if READERS.by_suffix(p.suffix) is None]
+        unknown = [p for p in files if READERS.by_suffix(format_suffix(p)) is None]
         dicom = [p for p in unknown[:_DICOM_CHECKS] if _is_dicom(p)]
     if dicom:
         return (
@@ -213,11 +242,11 @@ def _unsupported_folder(folder: Path) -> str | None:
                 "a folder is read as a stack of TIFF slices and this one holds none; "
                 f"it holds {kind} ({p.name}), which is not read yet; {_CONVERT}"
             )
-    headers = [p for p in files if p.suffix.lower() in _HEADER_SUFFIXES]
+    headers = [p for p in files if format_suffix(p) in _HEADER_SUFFIXES]
     if headers:
         return (
             "a folder is read as a stack of TIFF slices and this one holds none; it holds "
-            f"a {_HEADER_SUFFIXES[headers[0].suffix.lower()]} ({headers[0].name}): give that "
+            f"a {_HEADER_SUFFIXES[format_suffix(headers[0])]} ({headers[0].name}): give that "
             "file instead"
         )
     return None
@@ -233,12 +262,12 @@ def detect_format(spec: str) -> str:
     if path.is_dir():
         zarr = path.suffix.lower() == ".zarr" or is_zarr_store(path)
         return "zarr" if zarr else "tiff"
-    suffix = path.suffix.lower()
+    suffix = format_suffix(path)
     if not path.exists() and globlib.has_magic(spec):
-        suffix = Path(spec.rstrip("*?]")).suffix.lower() or suffix
+        suffix = format_suffix(spec.rstrip("*?]")) or suffix
         matches = globlib.glob(spec)
         if matches:
-            suffix = Path(matches[0]).suffix.lower()
+            suffix = format_suffix(matches[0])
     found = READERS.by_suffix(suffix)
     if found:
         return found[0]
@@ -268,7 +297,7 @@ def read_volume(
         folder is a Zarr store.
     format : str or None
         Reader name (``raw``, ``nrrd``, ``tiff``, ``zarr``, ``numpy``, ``metaimage``,
-        ``image``); None
+        ``nifti``, ``image``); None
         guesses from the suffix (see :func:`detect_format`).
     spacing, origin : sequence of float or None
         Override what the file says (x, y[, z]).
@@ -278,7 +307,8 @@ def read_volume(
         ``allow_outside_data`` (detached NRRD or MetaImage data outside the
         header's folder),
         ``scale`` (OME-Zarr resolution level), ``allow_missing_chunks`` (Zarr),
-        ``key`` (the array of a NumPy ``.npz``).
+        ``key`` (the array of a NumPy ``.npz``), ``volume_index`` (the volume of a
+        4D NIfTI image).
 
     Raises
     ------
@@ -356,6 +386,7 @@ __all__ = [
     "Reader",
     "ReadOptions",
     "detect_format",
+    "format_suffix",
     "read_volume",
     "unsupported_format",
 ]

@@ -45,6 +45,8 @@ class ReadOptions:
     key : str or None
         NumPy ``.npz`` archives holding several arrays: the name of the one to
         read (not needed when the archive holds one array).
+    volume_index : int or None
+        4D images (NIfTI time series): the volume to read, 0 being the first.
     """
 
     shape: tuple[int, ...] | None = None
@@ -56,6 +58,7 @@ class ReadOptions:
     scale: int = 0
     allow_missing_chunks: bool = False
     key: str | None = None
+    volume_index: int | None = None
 
     def given(self) -> set[str]:
         """Names of the options that differ from their defaults."""
