@@ -175,6 +175,14 @@ OriginOpt = Annotated[
     typer.Option(help="Override the origin: x y (z).", rich_help_panel="Input"),
 ]
 
+SpaceOpt = Annotated[
+    str | None,
+    typer.Option(
+        help="World frame of the mesh: lps (NRRD, DICOM, ITK) or ras (NIfTI); converts "
+        "from the frame the file states (default: keep it).",
+        rich_help_panel="Input",
+    ),
+]
 SchedulerOpt = Annotated[
     str | None,
     typer.Option(
@@ -394,6 +402,7 @@ def convert(
     allow_missing_chunks: MissingChunksOpt = False,
     key: KeyOpt = None,
     volume_index: VolumeIndexOpt = None,
+    space: SpaceOpt = None,
     block_size: Annotated[
         int | None,
         typer.Option(
@@ -436,6 +445,7 @@ def convert(
             axis=axis.value if axis else None,
             vertex_offset=_vertex_offset(no_degenerate, exact_placement),
             nan_as=nan_as,
+            space=space,
             blocks=_blocks(block_size, max_memory, scheduler),
             on_status=on_status,
             on_progress=on_progress,
@@ -614,6 +624,7 @@ def batch(
             "(implied by --method squares).",
         ),
     ] = False,
+    space: SpaceOpt = None,
     scheduler: SchedulerOpt = None,
 ) -> None:
     """Convert many volumes: files, folders (--recursive) and globs, in parallel."""
@@ -676,6 +687,7 @@ def batch(
             flip=flip,
             method=method,
             vertex_offset=_vertex_offset(no_degenerate, exact_placement),
+            space=space,
             # the files running at once share the budget
             blocks=Blocks(max_memory=max(1, budget // workers) if budget else None),
         ),

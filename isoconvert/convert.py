@@ -58,6 +58,9 @@ class ConvertOptions:
         Overwrite an existing output.
     blocks : Blocks
         Block-wise extraction: slab size, memory budget, Dask scheduler.
+    space : str or None
+        "lps" or "ras": convert world coordinates to that anatomical frame
+        (the file must state its own); None keeps the file's.
     source_name : str or None
         What the mesh records as its source (file headers, reports); None:
         the input as given. (A cluster worker opens the absolute path but
@@ -78,6 +81,7 @@ class ConvertOptions:
     ascii: bool = False
     force: bool = False
     blocks: Blocks = field(default_factory=Blocks)
+    space: str | None = None
     source_name: str | None = None
 
     def updated(self, **changes) -> ConvertOptions:
@@ -174,6 +178,8 @@ def convert(
         origin=opts.origin,
         **{name: getattr(opts.read, name) for name in opts.read.given()},
     )
+    if opts.space is not None:
+        volume = volume.in_frame(opts.space)
     if opts.source_name is not None:
         volume.source = opts.source_name
     method_options = {} if opts.axis is None else {"axis": opts.axis}

@@ -21,6 +21,9 @@ SUPPORTED_DTYPES = (
     "float64",
 )
 
+#: Anatomical frames that world coordinates may be stated in (see :attr:`Volume.frame`).
+FRAMES = ("LPS", "RAS")
+
 # Samples per chunk when scanning a volume (about 64 MiB of float64): statistics
 # never need a full-size temporary.
 _CHUNK_SAMPLES = 8 * 1024 * 1024
@@ -55,6 +58,10 @@ class Volume:
         name), for the user to see.
     unit : str or None
         Unit of spacing and origin when the file states one.
+    frame : str or None
+        The anatomical frame of world coordinates when the file states one:
+        "LPS" (x to the patient's left, y posterior, z superior: NRRD, DICOM,
+        ITK's MetaImage) or "RAS" (NIfTI). :meth:`in_frame` converts.
     """
 
     data: np.ndarray
@@ -64,6 +71,7 @@ class Volume:
     source: str = "<array>"
     notes: list[str] = field(default_factory=list)
     unit: str | None = None
+    frame: str | None = None
 
     # where ``data`` lives (see the property at the end of this module)
     _grid = None
@@ -165,6 +173,41 @@ class Volume:
             source=self.source,
             notes=list(self.notes),
             unit=self.unit,
+            frame=self.frame,
+        )
+
+    def in_frame(self, frame: str) -> Volume:
+        """This volume with world coordinates in ``frame`` ("lps" or "ras").
+
+        LPS and RAS differ in the sign of x and y: a half turn about z, so
+        every placement and every triangle's orientation carry over (the same
+        mesh, turned). ``data`` is shared.
+
+        Raises
+        ------
+        VolumeError
+            An unknown frame, or a file that states none.
+        """
+        target = frame.upper()
+        if target not in FRAMES:
+            raise VolumeError(f"--space takes lps or ras, got {frame!r}")
+        if self.frame is None:
+            raise VolumeError(
+                f"{self.source}: the file does not say which anatomical frame its coordinates "
+                "are in, so --space cannot convert them; drop --space"
+            )
+        if self.frame == target:
+            return self
+        turn = np.diag([-1.0, -1.0, 1.0])[: self.ndim, : self.ndim]
+        return Volume(
+            self.samples,
+            spacing=self.spacing,
+            origin=turn @ self.origin,
+            direction=turn @ self.direction,
+            source=self.source,
+            notes=[*self.notes, f"coordinates converted from {self.frame} to {target}"],
+            unit=self.unit,
+            frame=target,
         )
 
 

@@ -35,6 +35,11 @@ def mesh_info(
     }
     if vertex_offset is not None:
         info["vertex_offset"] = vertex_offset
+    # where the coordinates are, for file headers (readers that know say so)
+    if volume.frame is not None:
+        info["frame"] = volume.frame
+    if volume.unit is not None:
+        info["unit"] = volume.unit
     return info
 
 

@@ -145,13 +145,18 @@ def read_metaimage(path: Path, options: ReadOptions) -> Volume:
     orientation = header.get("AnatomicalOrientation")
     if orientation and orientation.strip() and set(orientation.strip()) != {"?"}:
         notes.append(f"anatomical orientation {orientation.strip()} (as the file states)")
+    # ITK's world frame, which MetaImage files are written in, is LPS
+    placement = {
+        "spacing": spacing,
+        "origin": origin,
+        "direction": direction,
+        "source": str(path),
+        "notes": notes,
+        "frame": "LPS",
+    }
     if isinstance(data, RawGrid):
-        return Volume(
-            data, spacing=spacing, origin=origin, direction=direction, source=str(path), notes=notes
-        )
-    return Volume.from_zyx(
-        data, spacing=spacing, origin=origin, direction=direction, source=str(path), notes=notes
-    )
+        return Volume(data, **placement)
+    return Volume.from_zyx(data, **placement)
 
 
 def metaimage_data_files(path: Path) -> list[Path]:

@@ -161,6 +161,7 @@ def read_nifti(path: Path, options: ReadOptions) -> Volume:
         source=str(path),
         notes=notes,
         unit=unit,
+        frame="RAS",
     )
 
 

@@ -115,7 +115,17 @@ def read_nrrd(path: Path, options: ReadOptions) -> Volume:
         source=str(path),
         notes=notes,
         unit=unit,
+        frame=_FRAMES.get(str(header.get("space", "")).strip().lower()),
     )
+
+
+#: NRRD ``space`` values that name an anatomical frame isoconvert converts between.
+_FRAMES = {
+    "left-posterior-superior": "LPS",
+    "lps": "LPS",
+    "right-anterior-superior": "RAS",
+    "ras": "RAS",
+}
 
 
 def detached_data_files(path: Path) -> list[Path]:

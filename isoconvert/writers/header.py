@@ -108,8 +108,9 @@ def provenance(mesh: Mesh) -> list[str]:
     Returns
     -------
     list of str
-        ``made by isoconvert VERSION``, then ``source PATH`` and ``method M
-        level L`` when ``mesh.info`` has them.
+        ``made by isoconvert VERSION``, then ``source PATH``, ``method M
+        level L``, ``frame LPS`` (or RAS) and ``unit U`` when ``mesh.info``
+        has them.
     """
     info = mesh.info
     if not info:
@@ -123,6 +124,10 @@ def provenance(mesh: Mesh) -> list[str]:
         level = info.get("level", "?")
         level = f"{level:.17g}" if isinstance(level, numbers.Real) else str(level)
         lines.append(f"method {info['method']} level {level}")
+    if "frame" in info:
+        lines.append(f"frame {info['frame']}")
+    if "unit" in info:
+        lines.append(f"unit {info['unit']}")
     return lines
 
 
