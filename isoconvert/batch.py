@@ -23,7 +23,7 @@ from pathlib import Path
 from .convert import ConvertOptions
 from .errors import InputNotFoundError, IsoconvertError, OutputError
 from .quiet import silence_third_party
-from .readers import READERS, format_suffix, unsupported_format
+from .readers import READERS, format_suffix, is_dicom_file, unsupported_format
 from .readers.stacks import TIFF_SUFFIXES, is_zarr_store, natural_key
 
 #: Bytes of working memory a conversion needs per byte of samples (a native-order
@@ -37,7 +37,7 @@ MEMORY_BASE = 300 * 2**20
 class Found:
     """A volume found in the inputs: what to read and the name to mirror."""
 
-    spec: str  # a file, or a folder of TIFF slices
+    spec: str  # a file, or a folder of TIFF slices or DICOM files
     relative: Path  # its path relative to the input it was found under
     size: int  # bytes of samples, roughly, for scheduling
 
@@ -109,11 +109,10 @@ def discover(
     A folder holding only single-image TIFF slices of one shape is one volume
     (a stack); a ``.nhdr`` header and the data files it names count once;
     files of unknown formats are skipped with a reason, those of formats not
-    read yet (NIfTI, MetaImage, DICOM) with what
-    ``readers.unsupported_format`` says, and the DICOM files of a folder
-    holding no volume as one item. Symbolic links to folders are followed once
-    (a loop is cut where it closes); a file reached twice is converted once.
-    ``exclude`` (the output folder) is never searched.
+    read yet with what ``readers.unsupported_format`` says; the DICOM files of
+    a folder (``.dcm``, ``.dicom`` or the DICOM magic) are one volume, the folder.
+    Symbolic links to folders are followed once (a loop is cut where it closes);
+    a file reached twice is converted once. ``exclude`` (the output folder) is never searched.
 
     Parameters
     ----------
@@ -290,8 +289,7 @@ def _add_files(paths: list[Path], root: Path, found, skipped, images: bool = Fal
         for header in folder.glob("*.[mM][hH][dD]"):
             consumed.update({data: header for data in _mhd_data_files(header)})
     given = {q.resolve() for q in paths}
-    dicom: dict[Path, list[tuple[Path, str]]] = {}  # folder: DICOM files, why
-    start = len(found)
+    dicom: dict[Path, list[Path]] = {}  # folder: its DICOM files
     for p in paths:
         header = consumed.get(p.resolve())
         if header is not None:
@@ -302,12 +300,11 @@ def _add_files(paths: list[Path], root: Path, found, skipped, images: bool = Fal
                 continue
             # the header's format is not read yet: the file may still be read as raw
         match = READERS.by_suffix(format_suffix(p))
+        if (match and match[0] == "dicom") or (match is None and is_dicom_file(p)):
+            dicom.setdefault(p.parent, []).append(p)
+            continue
         if match is None:
-            reason = unsupported_format(p)
-            if reason and reason.startswith("DICOM"):
-                dicom.setdefault(p.parent, []).append((p, reason))
-            else:
-                skipped.append(Skipped(str(p), reason or UNKNOWN_REASON))
+            skipped.append(Skipped(str(p), unsupported_format(p) or UNKNOWN_REASON))
             continue
         if not images and _is_2d_image(p, match[0]):
             skipped.append(Skipped(str(p), IMAGE_REASON))
@@ -317,14 +314,17 @@ def _add_files(paths: list[Path], root: Path, found, skipped, images: bool = Fal
         except ValueError:
             rel = Path(p.name)
         found.append(Found(str(p), rel, _sample_bytes(p)))
-    with_volumes = {Path(f.spec).parent for f in found[start:]}
     for folder, files in dicom.items():
-        if len(files) > 1 and folder not in with_volumes:
-            # a DICOM series: one item, not one per slice
-            reason = f"a DICOM series of {len(files)} files; {files[0][1]}"
-            skipped.append(Skipped(str(folder), reason, files=len(files)))
-        else:
-            skipped.extend(Skipped(str(p), reason) for p, reason in files)
+        # the DICOM files of a folder are one volume (the reader sorts them into a series,
+        # or says which series there are): the folder, or the file when it is alone
+        spec = files[0] if len(files) == 1 else folder
+        try:
+            rel = spec.relative_to(root)
+        except ValueError:
+            rel = Path(spec.name)
+        if str(rel) == ".":
+            rel = Path(root.resolve().name)
+        found.append(Found(str(spec), rel, sum(p.stat().st_size for p in files)))
 
 
 def _is_2d_image(path: Path, reader: str) -> bool:

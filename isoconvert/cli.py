@@ -175,6 +175,14 @@ OriginOpt = Annotated[
     typer.Option(help="Override the origin: x y (z).", rich_help_panel="Input"),
 ]
 
+SeriesOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--series",
+        help="DICOM folder holding several series: the SeriesInstanceUID to read.",
+        rich_help_panel="Input",
+    ),
+]
 SpaceOpt = Annotated[
     str | None,
     typer.Option(
@@ -289,6 +297,7 @@ def _read_kwargs(
     allow_missing_chunks=False,
     key=None,
     volume_index=None,
+    series=None,
 ):
     kwargs = {
         "input_format": input_format,
@@ -306,6 +315,7 @@ def _read_kwargs(
         "allow_missing_chunks": allow_missing_chunks or None,
         "key": key,
         "volume_index": volume_index,
+        "series": series,
     }
     kwargs.update({k: v for k, v in opts.items() if v is not None})
     return kwargs
@@ -402,6 +412,7 @@ def convert(
     allow_missing_chunks: MissingChunksOpt = False,
     key: KeyOpt = None,
     volume_index: VolumeIndexOpt = None,
+    series: SeriesOpt = None,
     space: SpaceOpt = None,
     block_size: Annotated[
         int | None,
@@ -463,6 +474,7 @@ def convert(
                 allow_missing_chunks,
                 key,
                 volume_index,
+                series,
             ),
         )
     if not quiet:
@@ -877,6 +889,7 @@ def info(
     allow_missing_chunks: MissingChunksOpt = False,
     key: KeyOpt = None,
     volume_index: VolumeIndexOpt = None,
+    series: SeriesOpt = None,
 ) -> None:
     """Describe a volume (size, spacing, value range, histogram) and suggest isovalues."""
     _quiet_third_party()
@@ -897,6 +910,7 @@ def info(
         allow_missing_chunks,
         key,
         volume_index,
+        series,
     )
     volume = read_volume(input, format=kwargs.pop("input_format"), **kwargs)
     hist = histogram(volume.samples)

@@ -142,9 +142,10 @@ def make_bad_inputs(folder: Path) -> dict[str, Case]:
     # issue 11: MetaImage is read; a header without its ElementDataFile line is refused
     put("head.mhd", b"ObjectType = Image\nNDims = 3\n", says=("no ElementDataFile line",))
     put("head.mha", b"ObjectType = Image\nNDims = 3\n", says=("no ElementDataFile line",))
+    # DICOM is read (through pydicom); the magic alone, with no header, is refused
     dicom = bytes(128) + b"DICM" + bytes(64)
-    put("slice.dcm", dicom, says=("DICOM is not read yet",))
-    put("IM0001", dicom, says=("DICOM is not read yet",))
+    put("slice.dcm", dicom, says=("not a readable DICOM image",))
+    put("IM0001", dicom, says=("not a readable DICOM image",))
     tif = folder / "_good.tif"
     tifffile.imwrite(tif, good.astype(np.uint8), photometric="minisblack")
     put("truncated.tif", tif.read_bytes()[: len(tif.read_bytes()) // 2], says=("not a readable",))

@@ -261,7 +261,10 @@ def expected_reason(path: Path) -> str:
     return reason.removeprefix(f"{path}: ") if reason else UNKNOWN_REASON
 
 
-def test_a_dicom_series_folder_is_skipped_as_one_item(tmp_path):
+# DICOM is read: the DICOM files of a folder are one volume (the folder).
+
+
+def test_a_dicom_series_folder_is_one_volume(tmp_path):
     series = tmp_path / "scans" / "chest"
     series.mkdir(parents=True)
     for k in range(6):
@@ -269,18 +272,16 @@ def test_a_dicom_series_folder_is_skipped_as_one_item(tmp_path):
     (series / "extra.dcm").write_bytes(dicom_bytes())
     write_raw(tmp_path / "scans" / "v_10x10x10_float32.raw")
     found, skipped = discover([str(tmp_path / "scans")], recursive=True)
-    assert [str(f.relative) for f in found] == ["v_10x10x10_float32.raw"]
-    (dicom,) = [s for s in skipped if s.path == str(series)]
-    assert dicom.files == 7 and "DICOM" in dicom.reason and "7 files" in dicom.reason
+    assert sorted(str(f.relative) for f in found) == ["chest", "v_10x10x10_float32.raw"]
+    (dicom,) = [f for f in found if f.spec == str(series)]
+    assert dicom.size == 7 * len(dicom_bytes())
     assert not [s for s in skipped if Path(s.path).parent == series]
-    # the folder alone: one item, and no volume
+    # the folder alone: one volume, named after the folder
     found, skipped = discover([str(series)])
-    assert not found and len(skipped) == 1 and skipped[0].files == 7
-    with pytest.raises(IsoconvertError, match="7 files skipped"):
-        check_found([str(series)], found, skipped)
+    assert [(f.spec, str(f.relative)) for f in found] == [(str(series), "chest")] and not skipped
 
 
-def test_discovery_gives_the_reason_readers_give_for_formats_not_read_yet(tmp_path):
+def test_discovery_finds_dicom_and_gives_the_reason_readers_give_for_the_rest(tmp_path):
     (tmp_path / "series").mkdir()
     for k in range(3):
         (tmp_path / "series" / f"IM{k}").write_bytes(dicom_bytes())
@@ -288,14 +289,10 @@ def test_discovery_gives_the_reason_readers_give_for_formats_not_read_yet(tmp_pa
     (tmp_path / "notes.txt").write_text("x")
     found, skipped = discover([str(tmp_path)], recursive=True)
     reasons = {Path(s.path).name: s.reason for s in skipped}
-    assert not found
-    dicom = readers.unsupported_format(tmp_path / "series" / "IM0")
-    assert dicom.startswith("DICOM is not read yet")
-    assert reasons == {
-        "slice.dicom": readers.unsupported_format(tmp_path / "slice.dicom"),
-        "notes.txt": UNKNOWN_REASON,
-        "series": f"a DICOM series of 3 files; {dicom}",
-    }
+    # a lone DICOM file is itself the volume; reading it says what is wrong with it
+    assert sorted(Path(f.spec).name for f in found) == ["series", "slice.dicom"]
+    assert readers.unsupported_format(tmp_path / "series") is None
+    assert reasons == {"notes.txt": UNKNOWN_REASON}
 
 
 def test_the_data_file_of_a_metaimage_header_counts_once(tmp_path):
@@ -331,8 +328,10 @@ def test_real_dataset_folder_skips_previews_dicom_and_metaimage_data():
     assert "quarter.nhdr" in names and "engine_256x256x128_uint8.raw" in names
     assert "HeadMRVolume.raw" not in names  # MetaImage data: not a headerless volume
     assert not any(Path(f.spec).parent.name == "previews" for f in found)
-    (dicom,) = [s for s in skipped if s.path.endswith("ct_chest_LIDC-IDRI-0314_dicom")]
-    assert dicom.files == 64
+    # a folder's DICOM files are one volume
+    (dicom,) = [f for f in found if f.spec.endswith("ct_chest_LIDC-IDRI-0314_dicom")]
+    assert str(dicom.relative) == "ct_chest_LIDC-IDRI-0314_dicom"
+    assert not [f for f in found if f.spec.endswith(".dcm")]
 
 
 # --- f. non-ASCII paths ---------------------------------------------------------------------

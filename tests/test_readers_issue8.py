@@ -18,7 +18,7 @@ from make_bad_inputs import gzip_bomb
 
 from isoconvert import read_volume
 from isoconvert.errors import FormatError, VolumeError
-from isoconvert.readers import unsupported_format
+from isoconvert.readers import detect_format, unsupported_format
 
 
 @pytest.fixture
@@ -543,21 +543,16 @@ def test_byte_order_hint_reads_a_bounded_sample_of_a_big_file(tmp_path):
 
 
 def test_formats_not_read_yet_are_named(tmp_path):
+    # DICOM is read (the dicom reader): a file with the magic and no header is refused as such
     dicom = bytes(128) + b"DICM" + bytes(16)
-    files = {
-        "slice.dcm": ("DICOM", dicom),
-        "IM_0001": ("DICOM", dicom),
-        "1.2.840.113619.2.5": ("DICOM", dicom),
-    }
-    for name, (kind, data) in files.items():
+    for name in ("slice.dcm", "IM_0001", "1.2.840.113619.2.5"):
         path = tmp_path / name
-        path.write_bytes(data)
-        reason = unsupported_format(path)
-        assert reason and reason.startswith(f"{kind} is not read yet;"), (name, reason)
-        assert "NRRD" in reason and "--input-format" not in reason
-        with pytest.raises(FormatError) as err:
+        path.write_bytes(dicom)
+        assert unsupported_format(path) is None, name
+        assert detect_format(str(path)) == "dicom", name
+        with pytest.raises(FormatError, match="not a readable DICOM image") as err:
             read_volume(path)
-        assert str(err.value) == f"{path}: {reason}"
+        assert str(err.value).startswith(f"{path}: ") and "\n" not in str(err.value)
     for name in ("head.mhd", "head.mha"):  # MetaImage is read since issue 11
         (tmp_path / name).write_bytes(b"NDims = 3\n")
         assert unsupported_format(tmp_path / name) is None
@@ -570,9 +565,9 @@ def test_formats_not_read_yet_are_named(tmp_path):
     series.mkdir()
     for k in range(3):
         (series / f"IM{k}").write_bytes(dicom)
-    reason = unsupported_format(series)
-    assert reason.startswith("DICOM is not read yet")
-    with pytest.raises(FormatError, match="DICOM is not read yet"):
+    assert unsupported_format(series) is None
+    assert detect_format(str(series)) == "dicom"  # not a TIFF stack
+    with pytest.raises(FormatError, match="no DICOM image files in"):
         read_volume(series)
 
 
@@ -592,15 +587,15 @@ def test_other_files_are_not_flagged(tmp_path, zyx):
     raw = tmp_path / "pixels.dcm"
     zyx.tofile(raw)
     assert read_volume(raw, format="raw", shape=(5, 3, 4), dtype="int16").shape == (5, 3, 4)
-    assert unsupported_format(raw).startswith("DICOM")
+    assert unsupported_format(raw) is None  # DICOM is read (and this file is not DICOM)
 
 
 def test_real_dicom_and_metaimage_are_named():
     chest = dataset("ct_chest_LIDC-IDRI-0314_dicom")
-    with pytest.raises(FormatError, match=r"ct_chest_LIDC-IDRI-0314_dicom: DICOM is not read yet"):
-        read_volume(chest)
+    assert unsupported_format(chest) is None and detect_format(str(chest)) == "dicom"
+    assert read_volume(chest).shape == (512, 512, 64)  # read since DICOM support
     first = sorted(chest.iterdir())[0]
-    assert unsupported_format(first).startswith("DICOM is not read yet")
+    assert unsupported_format(first) is None
     head = dataset("HeadMRVolume")
     with pytest.raises(FormatError, match="MetaImage header .HeadMRVolume.mhd.: give that file"):
         read_volume(head)
@@ -611,7 +606,7 @@ def test_real_dicom_and_metaimage_are_named():
 
 
 def test_unsupported_format_is_cheap(tmp_path, monkeypatch):
-    """Files a reader claims are judged by name; others read at most 132 bytes."""
+    """Files are judged by name; telling DICOM by its magic reads at most 132 bytes."""
     big = tmp_path / "blob.bin2"
     big.write_bytes(bytes(1 << 20))
     sizes = []
@@ -635,5 +630,9 @@ def test_unsupported_format_is_cheap(tmp_path, monkeypatch):
     monkeypatch.setattr(builtins, "open", counting_open)
     assert unsupported_format(big) is None
     assert unsupported_format(raw) is None
+    assert sizes == []  # DICOM is read now: no file needs its magic looked at
+    with pytest.raises(FormatError, match="cannot tell the format"):
+        detect_format(str(big))  # no reader claims .bin2: is it DICOM?
+    assert detect_format(str(raw)) == "raw"
     monkeypatch.undo()
     assert sizes == [132]

@@ -116,6 +116,19 @@ READERS.register(
     ),
 )
 READERS.register(
+    "dicom",
+    Reader(
+        "dicom",
+        "DICOM series via pydicom: a folder of slices or one .dcm file of it (sorted by "
+        "position, rescaled to HU, LPS; --series UID picks one of several)",
+        (".dcm", ".dicom"),
+        LazyFunction("isoconvert.readers.dicom:read_dicom"),
+        frozenset({"series"}),
+        stacks=True,
+        folder=True,
+    ),
+)
+READERS.register(
     "image",
     Reader(
         "image",
@@ -128,10 +141,7 @@ READERS.register(
 
 
 # Formats recognised but not read yet (a later issue): what to call them in messages.
-_NOT_READ_YET = {
-    ".dcm": "DICOM",
-    ".dicom": "DICOM",
-}
+_NOT_READ_YET: dict[str, str] = {}
 # Files that are a whole volume by themselves: a folder holding one is not a TIFF stack.
 _HEADER_SUFFIXES = {
     ".mhd": "MetaImage header",
@@ -161,8 +171,9 @@ _CONVERT = f"convert it to NRRD first {_TOOLS}"
 _DICOM_CHECKS = 16  # files of a folder looked at for the DICOM magic
 
 
-def _is_dicom(path: Path) -> bool:
-    """True when the file has the DICOM magic "DICM" after its 128-byte preamble."""
+def is_dicom_file(path: str | Path) -> bool:
+    """True when the file has the DICOM magic "DICM" after its 128-byte preamble
+    (reads 132 bytes; DICOM files often have no suffix, or a number)."""
     try:
         with open(path, "rb") as fh:
             head = fh.read(132)
@@ -172,21 +183,34 @@ def _is_dicom(path: Path) -> bool:
 
 
 def _kind_not_read(path: Path, look_inside: bool = True) -> str | None:
-    kind = _NOT_READ_YET.get(format_suffix(path))
-    if kind is None and look_inside and READERS.by_suffix(format_suffix(path)) is None:
-        # DICOM files often have no suffix (or a number): only the magic tells
-        kind = "DICOM" if _is_dicom(path) else None
-    return kind
+    return _NOT_READ_YET.get(format_suffix(path))
+
+
+def _is_dicom_folder(folder: Path) -> bool:
+    """True when a folder (not a Zarr store) holds no TIFF slices but DICOM files: ``.dcm``
+    or ``.dicom`` files, or, among its first files whose suffix no reader claims, one
+    with the DICOM magic (DICOM files often have no suffix, or a number)."""
+    if is_zarr_store(folder):
+        return False
+    try:
+        files = sorted((p for p in folder.iterdir() if p.is_file()), key=natural_key)
+    except OSError:
+        return False
+    if any(p.suffix.lower() in TIFF_SUFFIXES for p in files):
+        return False
+    if any(format_suffix(p) in (".dcm", ".dicom") for p in files):
+        return True
+    unknown = [p for p in files if READERS.by_suffix(format_suffix(p)) is None]
+    return any(is_dicom_file(p) for p in unknown[:_DICOM_CHECKS])
 
 
 def unsupported_format(path: Path) -> str | None:
     """Why ``path`` cannot be read yet, when it is a format isoconvert knows but does not read.
 
-    Recognises DICOM (``.dcm``, or the "DICM"
-    magic at byte 128 of a file whose suffix no reader claims), and folders of
-    DICOM files. Cheap enough to call on every
-    file of a folder: it reads at most 132 bytes, and only of files whose
-    suffix no reader claims.
+    Recognises folders that hold no TIFF slices but a volume file of another
+    format (a MetaImage or NIfTI header: give that file). DICOM files and
+    folders of them are read (the ``dicom`` reader). Cheap enough to call on
+    every file of a folder.
 
     Parameters
     ----------
@@ -211,30 +235,19 @@ def unsupported_format(path: Path) -> str | None:
     kind = _kind_not_read(path)
     if kind is None:
         return None
-    if kind == "DICOM":
-        return f"DICOM is not read yet; convert the series to NRRD first {_TOOLS}"
     return f"{kind} is not read yet; {_CONVERT}"
 
 
 def _unsupported_folder(folder: Path) -> str | None:
-    """A folder that holds no TIFF slices but files of a format not read yet."""
+    """A folder that holds no TIFF slices (nor DICOM files) but files of a format not read yet."""
     if is_zarr_store(folder):
         return None
     try:
         files = sorted((p for p in folder.iterdir() if p.is_file()), key=natural_key)
     except OSError:
         return None
-    if any(p.suffix.lower() in TIFF_SUFFIXES for p in files):
+    if any(p.suffix.lower() in TIFF_SUFFIXES for p in files) or _is_dicom_folder(folder):
         return None
-    dicom = [p for p in files if _kind_not_read(p, look_inside=False) == "DICOM"]
-    if not dicom:
-        unknown = [p for p in files if READERS.by_suffix(format_suffix(p)) is None]
-        dicom = [p for p in unknown[:_DICOM_CHECKS] if _is_dicom(p)]
-    if dicom:
-        return (
-            f"DICOM is not read yet (a folder of DICOM files such as {dicom[0].name}); "
-            f"convert the series to NRRD first {_TOOLS}"
-        )
     for p in files:
         kind = _kind_not_read(p, look_inside=False)
         if kind:
@@ -256,13 +269,18 @@ def detect_format(spec: str) -> str:
     """Name of the reader for a path, folder or glob, from its suffix.
 
     A folder is a Zarr store when named ``*.zarr`` or holding Zarr metadata
-    (``zarr.json``, ``.zarray``, ``.zgroup``, ``.zattrs``), else a stack of TIFF slices.
+    (``zarr.json``, ``.zarray``, ``.zgroup``, ``.zattrs``), a DICOM series when it
+    holds DICOM files and no TIFF slices, else a stack of TIFF slices. A file
+    whose suffix no reader claims is DICOM when it has the DICOM magic.
     """
     path = Path(spec)
     if path.is_dir():
-        zarr = path.suffix.lower() == ".zarr" or is_zarr_store(path)
-        return "zarr" if zarr else "tiff"
+        if path.suffix.lower() == ".zarr" or is_zarr_store(path):
+            return "zarr"
+        return "dicom" if _is_dicom_folder(path) else "tiff"
     suffix = format_suffix(path)
+    if path.is_file() and READERS.by_suffix(suffix) is None and is_dicom_file(path):
+        return "dicom"
     if not path.exists() and globlib.has_magic(spec):
         suffix = format_suffix(spec.rstrip("*?]")) or suffix
         matches = globlib.glob(spec)
@@ -294,10 +312,10 @@ def read_volume(
     ----------
     path : str or Path
         The input. A folder or glob is a stack of TIFF slices, unless the
-        folder is a Zarr store.
+        folder is a Zarr store or holds DICOM files.
     format : str or None
         Reader name (``raw``, ``nrrd``, ``tiff``, ``zarr``, ``numpy``, ``metaimage``,
-        ``nifti``, ``image``); None
+        ``nifti``, ``dicom``, ``image``); None
         guesses from the suffix (see :func:`detect_format`).
     spacing, origin : sequence of float or None
         Override what the file says (x, y[, z]).
@@ -308,7 +326,8 @@ def read_volume(
         header's folder),
         ``scale`` (OME-Zarr resolution level), ``allow_missing_chunks`` (Zarr),
         ``key`` (the array of a NumPy ``.npz``), ``volume_index`` (the volume of a
-        4D NIfTI image).
+        4D NIfTI image), ``series`` (the SeriesInstanceUID of a DICOM folder
+        holding several).
 
     Raises
     ------
@@ -337,7 +356,7 @@ def read_volume(
     ):
         raise FormatError(
             f"{spec}: a folder or glob is read as a stack of TIFF slices (a folder also as a "
-            f"Zarr store), not {name}"
+            f"Zarr store or a DICOM series), not {name}"
         )
     try:
         opts = ReadOptions(**options)
@@ -387,6 +406,7 @@ __all__ = [
     "ReadOptions",
     "detect_format",
     "format_suffix",
+    "is_dicom_file",
     "read_volume",
     "unsupported_format",
 ]

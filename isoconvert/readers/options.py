@@ -47,6 +47,9 @@ class ReadOptions:
         read (not needed when the archive holds one array).
     volume_index : int or None
         4D images (NIfTI time series): the volume to read, 0 being the first.
+    series : str or None
+        DICOM folders holding several series: the SeriesInstanceUID of the one
+        to read.
     """
 
     shape: tuple[int, ...] | None = None
@@ -59,6 +62,7 @@ class ReadOptions:
     allow_missing_chunks: bool = False
     key: str | None = None
     volume_index: int | None = None
+    series: str | None = None
 
     def given(self) -> set[str]:
         """Names of the options that differ from their defaults."""
