@@ -429,6 +429,7 @@ _OPTION_KEYS = (
     "scale",
     "key",
     "volume_index",
+    "series",
 )
 
 
@@ -498,7 +499,7 @@ def _parse_option(key: str, value, path: Path, n: int):
             )
             kind = int if key == "shape" else float
             return tuple(kind(p) for p in parts)
-        if key in ("header_bytes", "channel", "scale"):
+        if key in ("header_bytes", "channel", "scale", "volume_index"):
             return int(value)
         if key == "level":
             return float(value)

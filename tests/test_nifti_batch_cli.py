@@ -43,3 +43,23 @@ def test_cli_volume_index(tmp_path, capsys):
     assert code == 0 and out.stat().st_size > 0
     code = main(["info", str(path), "--volume-index", "1"])
     assert code == 0 and "volume 1 of 2" in capsys.readouterr().out
+
+
+def test_a_level_mapping_picks_a_4d_volume_per_file(tmp_path):
+    """`volume_index` in --levels is a number, per file, as --volume-index is."""
+    from isoconvert.batch import read_mapping
+
+    mapping = tmp_path / "levels.toml"
+    mapping.write_text('[[volume]]\npattern = "*.nii"\nlevel = 0.5\nvolume_index = "1"\n')
+    assert read_mapping(mapping)[0].options == {"volume_index": 1}
+    series = np.stack([_ball(), _ball() - 1.0], axis=-1)  # the second volume is smaller
+    folder = tmp_path / "in"
+    folder.mkdir()
+    nib.save(nib.Nifti1Image(series, np.eye(4)), str(folder / "fmri.nii"))
+    code = main(["batch", str(folder), "-o", str(tmp_path / "out"), "--levels", str(mapping), "-q"])
+    assert code == 0
+    code = main(["convert", str(folder / "fmri.nii"), "-o", str(tmp_path / "one.ply"), "-l", "0.5",
+                 "--volume-index", "1"])  # fmt: skip
+    assert code == 0
+    body = (tmp_path / "out" / "fmri.ply").read_bytes().split(b"end_header")[1]
+    assert body == (tmp_path / "one.ply").read_bytes().split(b"end_header")[1]
