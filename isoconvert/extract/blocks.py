@@ -40,6 +40,7 @@ from ..volume import ValueRange, Volume
 from .placement import Allocate, kernel_outputs, mesh_info, reversed_orientation
 from .prepare import (
     _replace_nonfinite,
+    check_finite_level,
     check_level,
     check_vertex_offset,
     check_volume,
@@ -712,9 +713,7 @@ def extract_blocks(
         )
     blocks = blocks or Blocks()
     check_volume(volume, 3, method, nan_as)
-    level = float(level)
-    if not np.isfinite(level):
-        check_level(level, ValueRange(0.0, 0.0, 0), volume.source)
+    level = check_finite_level(level, volume.source)
     source = volume.samples
     dtype = kernel_type(np.empty((0, 0, 0), dtype=volume.dtype), volume.source).dtype
     layers = blocks.layers(volume.shape, dtype.itemsize)

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..mesh import Mesh
 from ..volume import Volume
-from .placement import Allocate, Block, kernel_outputs, mesh_info, reversed_orientation
+from .placement import Allocate, Block, kernel_outputs, mesh_info
 from .prepare import prepare
 from .tables import DEFAULT_AMBIGUITY, marching_cubes_table
 
@@ -66,15 +66,7 @@ def marching_cubes(
     prep = prepare(
         volume, 3, "cubes", level, nan_as=nan_as, vertex_offset=vertex_offset, on_status=on_status
     )
-    block = CubesBlock(
-        affine=volume.affine,
-        origin=volume.origin,
-        grid_shape=volume.shape,
-        offset=prep.offset,
-        ambiguity=ambiguity,
-        reverse=reversed_orientation(volume, flip),
-        threads=prep.threads,
-    )
+    block = CubesBlock.whole(volume, prep.offset, flip, prep.threads, ambiguity=ambiguity)
     verts, edge_ids, tris = block.extract(prep.array, prep.scan)
     return Mesh(verts, tris, edge_ids, mesh_info(volume, "cubes", prep.level, flip, prep.offset))
 

@@ -119,6 +119,20 @@ class Block:
     reverse: bool = False
     threads: int = 1
 
+    @classmethod
+    def whole(cls, volume: Volume, offset: float, flip: bool, threads: int, **options):
+        """The block that is the whole of a 3D ``volume`` (``options``: the
+        method's own fields, e.g. ``ambiguity``)."""
+        return cls(
+            affine=volume.affine,
+            origin=volume.origin,
+            grid_shape=volume.shape,
+            offset=offset,
+            reverse=reversed_orientation(volume, flip),
+            threads=threads,
+            **options,
+        )
+
     def placement(self, index_origin: tuple[int, int, int]) -> tuple:
         """The fill kernels' placement arguments for a block at ``index_origin``."""
         return kernel_placement(

@@ -161,15 +161,21 @@ def _narrow_int64(data: np.ndarray, src: str) -> np.ndarray:
     return data.astype(np.float64)
 
 
+def check_finite_level(level: float, src: str) -> float:
+    """``level`` as a float, refused when NaN or infinite (before any sample is read)."""
+    level = float(level)
+    if not np.isfinite(level):
+        raise LevelError(f"{src}: the level must be a finite number, got {level}")
+    return level
+
+
 def check_level(level: float, stats: ValueRange, src: str) -> float:
     """Make sure ``level`` separates some samples from others.
 
     A grid vertex is positive when its value is >= level (book Definition 2.1),
     so a surface exists exactly when ``min < level <= max``.
     """
-    level = float(level)
-    if not np.isfinite(level):
-        raise LevelError(f"{src}: the level must be a finite number, got {level}")
+    level = check_finite_level(level, src)
     if stats.min == stats.max:
         raise LevelError(
             f"{src}: the volume is constant (every sample is {stats.min:g}); it has no isosurface"
@@ -290,9 +296,7 @@ def prepare(
     from .. import _native
 
     src = volume.source
-    level = float(level)
-    if not np.isfinite(level):
-        raise LevelError(f"{src}: the level must be a finite number, got {level}")
+    level = check_finite_level(level, src)
     arr = kernel_samples(volume, ndim, method, nan_as, on_status)
     threads = kernel_threads()
     equal_to = equal_target(arr.dtype, level)

@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import IsoconvertError
 from ..mesh import Mesh
 from ..volume import Volume
-from .placement import Allocate, Block, kernel_outputs, mesh_info, reversed_orientation
+from .placement import Allocate, Block, kernel_outputs, mesh_info
 from .prepare import prepare
 from .tables import (
     CUBE_TETRAHEDRA,
@@ -63,14 +63,7 @@ def marching_tetrahedra(
     prep = prepare(
         volume, 3, "tetra", level, nan_as=nan_as, vertex_offset=vertex_offset, on_status=on_status
     )
-    block = TetraBlock(
-        affine=volume.affine,
-        origin=volume.origin,
-        grid_shape=volume.shape,
-        offset=prep.offset,
-        reverse=reversed_orientation(volume, flip),
-        threads=prep.threads,
-    )
+    block = TetraBlock.whole(volume, prep.offset, flip, prep.threads)
     verts, edge_ids, tris = block.extract(prep.array, prep.scan)
     return Mesh(verts, tris, edge_ids, mesh_info(volume, "tetra", prep.level, flip, prep.offset))
 
