@@ -33,9 +33,12 @@ _PUBLIC = {
     "Volume": ".volume",
     "WRITERS": ".writers",
     "write_mesh": ".writers",
+    "vertex_normals": ".attributes",
+    "vertex_values": ".attributes",
 }
 
 if TYPE_CHECKING:
+    from .attributes import vertex_normals, vertex_values
     from .convert import ConvertOptions, ConvertResult, convert
     from .errors import IsoconvertError
     from .extract import EXTRACTORS, extract
@@ -93,5 +96,7 @@ __all__ = [
     "convert",
     "extract",
     "read_volume",
+    "vertex_normals",
+    "vertex_values",
     "write_mesh",
 ]

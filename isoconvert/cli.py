@@ -23,7 +23,7 @@ from .checks import CHECK_NAMES
 from .errors import IsoconvertError, VolumeError, one_line
 from .methods import EXTRACTORS, NO_DEGENERATE_OFFSET, SQUARE_AMBIGUITY_RULES
 from .readers import READERS
-from .writers import WRITERS
+from .writers import WRITERS, check_attributes
 
 # What the help, `formats` and `methods` need comes from numpy-free tables
 # (methods, checks, and the readers' and writers' registries); each command
@@ -189,6 +189,14 @@ SpaceOpt = Annotated[
         help="World frame of the mesh: lps (NRRD, DICOM, ITK) or ras (NIfTI); converts "
         "from the frame the file states (default: keep it).",
         rich_help_panel="Input",
+    ),
+]
+NormalsOpt = Annotated[
+    bool,
+    _flag(
+        "--normals",
+        help="Write per-vertex normals from the volume's gradient (PLY, OBJ, VTP, GLB).",
+        rich_help_panel="Output",
     ),
 ]
 SchedulerOpt = Annotated[
@@ -414,6 +422,15 @@ def convert(
     volume_index: VolumeIndexOpt = None,
     series: SeriesOpt = None,
     space: SpaceOpt = None,
+    normals: NormalsOpt = False,
+    values: Annotated[
+        str | None,
+        typer.Option(
+            help="Write the value of this volume (read like the input) at each vertex, by "
+            "trilinear interpolation in world coordinates (PLY, VTP, GLB).",
+            rich_help_panel="Output",
+        ),
+    ] = None,
     block_size: Annotated[
         int | None,
         typer.Option(
@@ -457,6 +474,8 @@ def convert(
             vertex_offset=_vertex_offset(no_degenerate, exact_placement),
             nan_as=nan_as,
             space=space,
+            normals=normals,
+            values=values,
             blocks=_blocks(block_size, max_memory, scheduler),
             on_status=on_status,
             on_progress=on_progress,
@@ -637,6 +656,7 @@ def batch(
         ),
     ] = False,
     space: SpaceOpt = None,
+    normals: NormalsOpt = False,
     scheduler: SchedulerOpt = None,
 ) -> None:
     """Convert many volumes: files, folders (--recursive) and globs, in parallel."""
@@ -647,6 +667,7 @@ def batch(
 
     required = parse_requirements(require)
     writer = WRITERS.get(format)
+    check_attributes(writer, normals, False, "--format")
     batching.check_jobs(jobs)
     if level is None and levels is None:
         raise VolumeError("batch needs --level (a number or auto) or --levels FILE")
@@ -700,6 +721,7 @@ def batch(
             method=method,
             vertex_offset=_vertex_offset(no_degenerate, exact_placement),
             space=space,
+            normals=normals,
             # the files running at once share the budget
             blocks=Blocks(max_memory=max(1, budget // workers) if budget else None),
         ),

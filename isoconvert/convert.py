@@ -7,14 +7,17 @@ from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 from pathlib import Path
 
+import numpy as np
+
 from .atomic import check_output
+from .attributes import check_3d, vertex_normals, vertex_values
 from .errors import IsoconvertError, OutputError
 from .extract import extract
 from .extract.blocks import Blocks
 from .mesh import Mesh
 from .readers import ReadOptions, read_volume
 from .volume import Volume
-from .writers import WRITERS, output_format
+from .writers import WRITERS, check_attributes, output_format
 from .writers.stored import stored_mesh, write_mesh
 
 _READ_FIELDS = frozenset(f.name for f in fields(ReadOptions))
@@ -65,6 +68,13 @@ class ConvertOptions:
         What the mesh records as its source (file headers, reports); None:
         the input as given. (A cluster worker opens the absolute path but
         records the user's spelling, as a local run does.)
+    normals : bool
+        Write per-vertex normals: the volume's gradient at each vertex
+        (:func:`~isoconvert.attributes.vertex_normals`).
+    values : str, Path or None
+        A volume sampled at each vertex (trilinear, in world coordinates) and
+        written as its value (:func:`~isoconvert.attributes.vertex_values`);
+        read with the same options as the input.
     """
 
     read: ReadOptions = field(default_factory=ReadOptions)
@@ -83,6 +93,8 @@ class ConvertOptions:
     blocks: Blocks = field(default_factory=Blocks)
     space: str | None = None
     source_name: str | None = None
+    normals: bool = False
+    values: str | Path | None = None
 
     def updated(self, **changes) -> ConvertOptions:
         """A copy with ``changes``; names of :class:`ReadOptions` fields go to ``read``.
@@ -165,6 +177,7 @@ def convert(
     progress = on_progress or (lambda stage: None)
     check_output(output, opts.force)  # first: a folder given as -o is "a folder", not a format
     writer = output_format(output, opts.format)
+    check_attributes(writer, opts.normals, opts.values is not None, output)
     by_suffix = WRITERS.by_suffix(Path(output).suffix)
     if on_status and by_suffix and by_suffix[0] != writer.name:
         on_status(f"note: writing {writer.name} into {output}, whose extension says {by_suffix[0]}")
@@ -182,6 +195,9 @@ def convert(
         volume = volume.in_frame(opts.space)
     if opts.source_name is not None:
         volume.source = opts.source_name
+    if opts.normals:
+        check_3d(volume, "normals")
+    value_volume = None if opts.values is None else _value_volume(opts, volume)
     method_options = {} if opts.axis is None else {"axis": opts.axis}
     if opts.vertex_offset is not None:
         method_options["vertex_offset"] = opts.vertex_offset
@@ -201,8 +217,31 @@ def convert(
         blocks=blocks,
         **method_options,
     )
+    if opts.normals and len(mesh.cells):
+        mesh.normals = vertex_normals(mesh, volume, flip=opts.flip, nan_as=opts.nan_as)
+        mesh.info["normals"] = "volume gradient"
+    if value_volume is not None:
+        mesh.values = vertex_values(mesh, value_volume)
+        mesh.info["values"] = value_volume.source
+        outside = int(np.isnan(mesh.values).sum())
+        if outside and on_status:
+            on_status(
+                f"note: {outside} of {len(mesh.values)} vertices lie outside {value_volume.source} "
+                "(or on NaN samples): their value is NaN"
+            )
     progress("writing")
     path = write_mesh(
         mesh, output, format=writer.name, ascii=opts.ascii, force=opts.force, on_status=on_status
     )
     return ConvertResult(volume, mesh, path, writer.name, opts.ascii)
+
+
+def _value_volume(opts: ConvertOptions, volume: Volume) -> Volume:
+    """The volume of ``--values``, in the world frame of ``volume``."""
+    values = read_volume(
+        opts.values, **{name: getattr(opts.read, name) for name in opts.read.given()}
+    )
+    if volume.frame is not None and values.frame is not None and values.frame != volume.frame:
+        values = values.in_frame(volume.frame)
+    check_3d(values, "values")
+    return values

@@ -24,12 +24,20 @@ class Mesh:
         extracted separately share vertices exactly through these ids.
     info : dict
         Provenance (method, level, source) written into file headers.
+    normals : (V, 3) float32 or None
+        Unit normals at the vertices, pointing like the triangles' (from the
+        positive to the negative side); see :func:`isoconvert.vertex_normals`.
+    values : (V,) float32 or None
+        A scalar at each vertex (e.g. another volume sampled there, see
+        :func:`isoconvert.vertex_values`); NaN where it has none.
     """
 
     vertices: np.ndarray
     cells: np.ndarray
     edge_ids: np.ndarray | None = None
     info: dict = field(default_factory=dict)
+    normals: np.ndarray | None = None
+    values: np.ndarray | None = None
 
     @property
     def n_vertices(self) -> int:
@@ -44,8 +52,16 @@ class Mesh:
         return self.cells.ndim == 2 and self.cells.shape[1] == 3
 
     def flipped(self) -> Mesh:
-        """The same mesh with every cell's orientation reversed."""
-        return Mesh(self.vertices, self.cells[:, ::-1].copy(), self.edge_ids, dict(self.info))
+        """The same mesh with every cell's orientation reversed (and its normals)."""
+        normals = None if self.normals is None else -self.normals
+        return Mesh(
+            self.vertices,
+            self.cells[:, ::-1].copy(),
+            self.edge_ids,
+            dict(self.info),
+            normals,
+            self.values,
+        )
 
     def triangle_normals(self) -> np.ndarray:
         """(C, 3) float64 unit normals (right-hand rule); zero for zero-area triangles."""

@@ -20,6 +20,7 @@ using iso::i64;
 
 void bind_tetra_squares(nb::module_ &m);  // more.cpp
 void bind_report(nb::module_ &m);         // report.cpp
+void bind_sample(nb::module_ &m);         // sample.cpp
 
 namespace {
 
@@ -113,4 +114,5 @@ NB_MODULE(_native, m) {
 #undef ISO_BIND
   bind_tetra_squares(m);
   bind_report(m);
+  bind_sample(m);
 }

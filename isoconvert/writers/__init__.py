@@ -55,12 +55,15 @@ class Writer:
     #: whether it writes block by block, so a mesh larger than memory can
     #: wait for it in temporary files (isoconvert.writers.chunks)
     streams: bool = False
+    #: per-vertex attributes it stores: "normals", "values"
+    attributes: frozenset[str] = frozenset()
 
 
 WRITERS: Registry[Writer] = Registry("output format")
 _TRIANGLES = frozenset({3})
 _SEGMENTS = frozenset({2})
 _BOTH = frozenset({2, 3})
+_NORMALS_VALUES = frozenset({"normals", "values"})
 for _writer in (
     Writer(
         "ply",
@@ -73,6 +76,7 @@ for _writer in (
         precision="adaptive",
         records_grid=True,
         streams=True,
+        attributes=_NORMALS_VALUES,
     ),
     Writer(
         "obj",
@@ -84,6 +88,7 @@ for _writer in (
         precision="float64",
         records_grid=True,
         streams=True,
+        attributes=frozenset({"normals"}),
     ),
     Writer(
         "stl",
@@ -118,6 +123,7 @@ for _writer in (
         precision="adaptive",
         records_grid=True,
         streams=True,
+        attributes=_NORMALS_VALUES,
     ),
     Writer(
         "glb",
@@ -130,6 +136,7 @@ for _writer in (
         precision="float32",
         records_grid=True,
         streams=True,
+        attributes=_NORMALS_VALUES,
     ),
     Writer(
         "3mf",
@@ -153,6 +160,26 @@ for _writer in (
     ),
 ):
     WRITERS.register(_writer.name, _writer)
+
+
+def attribute_writers(attribute: str) -> list[str]:
+    """Names of the formats that store a per-vertex ``attribute`` ("normals", "values")."""
+    return [name for name, w in WRITERS.items() if attribute in w.attributes]
+
+
+def check_attributes(writer: Writer, normals: bool, values: bool, name: object) -> None:
+    """Refuse per-vertex normals or values for a format that cannot store them.
+
+    Raises
+    ------
+    FormatError
+    """
+    for attribute, wanted in (("normals", normals), ("values", values)):
+        if wanted and attribute not in writer.attributes:
+            raise FormatError(
+                f"{name}: {writer.name} cannot store per-vertex {attribute}; write "
+                f"{', '.join(attribute_writers(attribute))}, or leave out --{attribute}"
+            )
 
 
 def output_format(path: str | Path, format: str | None = None) -> Writer:
@@ -201,4 +228,12 @@ def __dir__() -> list[str]:
     return sorted(set(globals()) | _LAZY)
 
 
-__all__ = ["WRITERS", "Writer", "output_format", "stored_mesh", "write_mesh"]
+__all__ = [
+    "WRITERS",
+    "Writer",
+    "attribute_writers",
+    "check_attributes",
+    "output_format",
+    "stored_mesh",
+    "write_mesh",
+]

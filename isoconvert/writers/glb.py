@@ -6,7 +6,9 @@ Layout (all little-endian)::
     JSON chunk          length, "JSON", the glTF JSON padded with spaces to 4 bytes
     BIN chunk           length, "BIN\\0", then
                           POSITION  V x 3 float32   (bufferView 0, accessor 0, with min/max)
-                          indices   3C uint32       (bufferView 1, accessor 1)
+                          NORMAL    V x 3 float32   (with --normals: the next view and accessor)
+                          _VALUE    V float32       (with --values: the next)
+                          indices   3C uint32       (the last view and accessor)
 
 Both arrays are multiples of 4 bytes, so the BIN chunk needs no padding. Its
 length follows from V and C, so the JSON is written first and the arrays are
@@ -91,8 +93,29 @@ def gltf_json(mesh: Mesh) -> dict:
         gltf["scenes"] = [{}]  # an empty scene: glTF has no empty accessors
         return gltf
     low, high = _bounds(mesh.vertices)
-    positions = n_vertices * 12
-    indices = n_cells * 12
+    # (attribute, accessor type, bytes per vertex) after POSITION, in BIN order
+    extra = []
+    if mesh.normals is not None:
+        extra.append(("NORMAL", "VEC3", 12))
+    if mesh.values is not None:
+        extra.append(("_VALUE", "SCALAR", 4))  # an application-specific attribute
+    views = [{"byteLength": n_vertices * 12, "target": _ARRAY_BUFFER}]
+    accessors = [
+        {"componentType": _FLOAT, "count": n_vertices, "type": "VEC3", "min": low, "max": high}
+    ]
+    attributes = {"POSITION": 0}
+    for name, kind, width in extra:
+        attributes[name] = len(accessors)
+        views.append({"byteLength": n_vertices * width, "target": _ARRAY_BUFFER})
+        accessors.append({"componentType": _FLOAT, "count": n_vertices, "type": kind})
+    attributes_end = len(accessors)
+    views.append({"byteLength": n_cells * 12, "target": _ELEMENT_ARRAY_BUFFER})
+    accessors.append({"componentType": _UNSIGNED_INT, "count": 3 * n_cells, "type": "SCALAR"})
+    offset = 0
+    for number, (view, accessor) in enumerate(zip(views, accessors, strict=True)):
+        view.update(buffer=0, byteOffset=offset)
+        offset += view["byteLength"]
+        accessor["bufferView"] = number
     gltf.update(
         {
             "scenes": [{"nodes": [0]}],
@@ -101,41 +124,13 @@ def gltf_json(mesh: Mesh) -> dict:
                 {
                     "name": "isosurface",
                     "primitives": [
-                        {"attributes": {"POSITION": 0}, "indices": 1, "mode": _TRIANGLES}
+                        {"attributes": attributes, "indices": attributes_end, "mode": _TRIANGLES}
                     ],
                 }
             ],
-            "buffers": [{"byteLength": positions + indices}],
-            "bufferViews": [
-                {
-                    "buffer": 0,
-                    "byteOffset": 0,
-                    "byteLength": positions,
-                    "target": _ARRAY_BUFFER,
-                },
-                {
-                    "buffer": 0,
-                    "byteOffset": positions,
-                    "byteLength": indices,
-                    "target": _ELEMENT_ARRAY_BUFFER,
-                },
-            ],
-            "accessors": [
-                {
-                    "bufferView": 0,
-                    "componentType": _FLOAT,
-                    "count": n_vertices,
-                    "type": "VEC3",
-                    "min": low,
-                    "max": high,
-                },
-                {
-                    "bufferView": 1,
-                    "componentType": _UNSIGNED_INT,
-                    "count": 3 * n_cells,
-                    "type": "SCALAR",
-                },
-            ],
+            "buffers": [{"byteLength": offset}],
+            "bufferViews": views,
+            "accessors": accessors,
         }
     )
     return gltf
@@ -143,7 +138,8 @@ def gltf_json(mesh: Mesh) -> dict:
 
 def write_glb(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
     """Write one mesh, one primitive of triangles (mode 4) with POSITION (float32
-    VEC3, with min and max) and uint32 indices, a node and a scene.
+    VEC3, with min and max), NORMAL and ``_VALUE`` (float32) when the mesh has
+    normals and values, and uint32 indices, a node and a scene.
 
     ``asset.generator`` is ``isoconvert VERSION``; ``asset.extras["isoconvert"]``
     holds ``provenance`` (the lines PLY and OBJ headers get, escaped the same
@@ -170,7 +166,8 @@ def write_glb(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
         gltf_json(mesh), separators=(",", ":"), ensure_ascii=False, allow_nan=False
     ).encode("utf-8")
     text += b" " * (-len(text) % 4)
-    data = 12 * (n_vertices + n_cells) if n_cells else 0
+    per_vertex = 12 + 12 * (mesh.normals is not None) + 4 * (mesh.values is not None)
+    data = per_vertex * n_vertices + 12 * n_cells if n_cells else 0
     total = 12 + 8 + len(text) + (8 + data if data else 0)
     if total > _MAX_BYTES:
         raise FormatError(
@@ -185,5 +182,9 @@ def write_glb(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
     for block in row_chunks(mesh.vertices):
         with np.errstate(over="ignore", invalid="ignore"):
             fh.write(block.astype("<f4").tobytes())
+    for attribute in (mesh.normals, mesh.values):
+        if attribute is not None:
+            for block in row_chunks(attribute):
+                fh.write(block.astype("<f4").tobytes())
     for block in row_chunks(mesh.cells):
         fh.write(block.astype("<u4").tobytes())

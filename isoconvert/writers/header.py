@@ -109,8 +109,8 @@ def provenance(mesh: Mesh) -> list[str]:
     -------
     list of str
         ``made by isoconvert VERSION``, then ``source PATH``, ``method M
-        level L``, ``frame LPS`` (or RAS) and ``unit U`` when ``mesh.info``
-        has them.
+        level L``, ``frame LPS`` (or RAS), ``unit U``, ``normals FROM`` and
+        ``values FROM`` when ``mesh.info`` has them.
     """
     info = mesh.info
     if not info:
@@ -128,6 +128,10 @@ def provenance(mesh: Mesh) -> list[str]:
         lines.append(f"frame {info['frame']}")
     if "unit" in info:
         lines.append(f"unit {info['unit']}")
+    # where per-vertex attributes came from
+    for attribute in ("normals", "values"):
+        if attribute in info:
+            lines.append(f"{attribute} {info[attribute]}")
     return lines
 
 

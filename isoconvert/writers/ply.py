@@ -7,14 +7,15 @@ from typing import BinaryIO
 import numpy as np
 
 from ..mesh import Mesh
-from .chunks import row_chunks
+from .chunks import ROWS, row_chunks
 from .header import header_comments
 from .text import write_rows
 
 
 def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
-    """Write vertices as x, y, z and cells as ``face`` (triangles) or ``edge``
-    (segments) elements, indices int32.
+    """Write vertices as x, y, z (then ``nx, ny, nz`` and ``value``, float, when
+    the mesh has normals and values) and cells as ``face`` (triangles) or
+    ``edge`` (segments) elements, indices int32.
 
     Coordinates are ``double`` when ``mesh.info["stored_precision"]`` is
     "float64", else ``float`` (float32, rounded here); :func:`isoconvert.write_mesh` decides
@@ -43,6 +44,13 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
         f"property {kind} y",
         f"property {kind} z",
     ]
+    columns = [verts]
+    if mesh.normals is not None:
+        header += ["property float nx", "property float ny", "property float nz"]
+        columns.append(mesh.normals)
+    if mesh.values is not None:
+        header.append("property float value")
+        columns.append(mesh.values.reshape(-1, 1))
     if triangles:
         header += [f"element face {len(cells)}", "property list uchar int vertex_indices"]
     else:
@@ -52,11 +60,34 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
     if ascii:
         # 17 significant digits give a double back exactly, 9 a float
         digits = 17 if double else 9
-        write_rows(fh, verts, f"%.{digits}g %.{digits}g %.{digits}g\n", dtype=stored)
+        extra = sum(c.shape[1] for c in columns[1:])
+        row = " ".join([f"%.{digits}g"] * 3 + ["%.9g"] * extra) + "\n"
+        for i, block in enumerate(row_chunks(verts)):
+            # attributes are float32 values: exact in either precision
+            a = i * ROWS
+            rows = [block.astype(stored)] + [c[a : a + ROWS].astype(stored) for c in columns[1:]]
+            write_rows(fh, np.hstack(rows), row)
         write_rows(fh, cells, "3 %d %d %d\n" if triangles else "%d %d\n")
         return
-    for block in row_chunks(verts):
-        fh.write(block.astype("<f8" if double else "<f4", copy=False).tobytes())
+    if len(columns) == 1:
+        for block in row_chunks(verts):
+            fh.write(block.astype("<f8" if double else "<f4", copy=False).tobytes())
+    else:
+        fields = [("xyz", "<f8" if double else "<f4", (3,))]
+        if mesh.normals is not None:
+            fields.append(("normal", "<f4", (3,)))
+        if mesh.values is not None:
+            fields.append(("value", "<f4"))
+        vertex = np.dtype(fields)
+        for i, block in enumerate(row_chunks(verts)):
+            a = i * ROWS
+            out = np.empty(len(block), dtype=vertex)
+            out["xyz"] = block
+            if mesh.normals is not None:
+                out["normal"] = mesh.normals[a : a + ROWS]
+            if mesh.values is not None:
+                out["value"] = mesh.values[a : a + ROWS]
+            fh.write(out.tobytes())
     record = np.dtype([("n", "u1"), ("v", "<i4", (3,))]) if triangles else np.dtype("<i4")
     for block in row_chunks(cells):
         if triangles:

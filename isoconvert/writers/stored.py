@@ -15,7 +15,7 @@ from ..atomic import atomic_output
 from ..errors import FormatError
 from ..geometry import normalized_grid
 from ..mesh import Mesh
-from . import WRITERS, Writer, output_format
+from . import WRITERS, Writer, check_attributes, output_format
 from .chunks import row_chunks
 from .precision import Float32Loss, float32_loss
 
@@ -37,6 +37,7 @@ def _check_cells(writer: Writer, mesh: Mesh, name: str | Path) -> None:
             f"{name}: {kind} {row} of the mesh refers to vertex {index}, "
             f"but the mesh has {n} vertices"
         )
+    check_attributes(writer, mesh.normals is not None, mesh.values is not None, name)
 
 
 def _stored(
@@ -52,6 +53,7 @@ def _stored(
     """
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     cells = np.asarray(mesh.cells, dtype=np.int64)
+    normals, values = mesh.normals, mesh.values
     kind = "triangles" if cells.shape[1] == 3 else "segments"
     if writer.expands and len(cells):
         # only the vertices that cells use reach the file
@@ -61,6 +63,8 @@ def _stored(
         if not used.all():
             renumber = np.cumsum(used) - 1
             vertices, cells = vertices[used], renumber[cells]
+            normals = None if normals is None else normals[used]
+            values = None if values is None else values[used]
     elif writer.expands:
         vertices = vertices[:0]
     precision = writer.precision
@@ -92,9 +96,17 @@ def _stored(
     if precision in ("float32", "float64"):
         info["stored_precision"] = precision
     if writer.expands and expand:
-        vertices = vertices[cells].reshape(-1, 3)
+        flat = cells.ravel()
+        vertices = vertices[flat]
+        normals = None if normals is None else normals[flat]
+        values = None if values is None else values[flat]
         cells = np.arange(len(vertices), dtype=np.int64).reshape(-1, cells.shape[1])
-    return Mesh(vertices, cells, None, info)
+    # per-vertex attributes are stored as float32 by every format that has them
+    if normals is not None:
+        normals = np.asarray(normals, dtype=np.float32)
+    if values is not None:
+        values = np.asarray(values, dtype=np.float32)
+    return Mesh(vertices, cells, None, info, normals, values)
 
 
 def _float32_loss(vertices: np.ndarray, cells: np.ndarray, mesh: Mesh) -> tuple:

@@ -11,6 +11,8 @@ Layout of the binary file (``byte_order="LittleEndian"``,
           <Array type="String" Name="isoconvert" NumberOfTuples="n" format="appended" offset="0"/>
         </FieldData>
         <Piece NumberOfPoints="V" NumberOfPolys="C" ...>   (NumberOfLines for segments)
+          <PointData Normals="Normals" Scalars="value">     (only with normals or values)
+            Normals (Float32, 3 components), value (Float32) </PointData>
           <Points> <DataArray type="Float32|Float64" NumberOfComponents="3" .../> </Points>
           <Polys>  connectivity (Int64), offsets (Int64: 3, 6, 9, ...) </Polys>
         </Piece>
@@ -51,7 +53,9 @@ def _lines(mesh: Mesh) -> list[str]:
 
 def write_vtp(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
     """Write vertices as ``Points`` and cells as ``Polys`` (triangles) or
-    ``Lines`` (segments), indices Int64.
+    ``Lines`` (segments), indices Int64; normals and values, when the mesh has
+    them, as Float32 ``PointData`` arrays ``Normals`` and ``value`` (the active
+    normals and scalars).
 
     Points are Float64 when ``mesh.info["stored_precision"]`` is "float64",
     else Float32 (rounded here); :func:`isoconvert.write_mesh` decides, as
@@ -82,10 +86,18 @@ def write_vtp(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
         where = 'format="ascii">' if offset is None else f'format="appended" offset="{offset}"/>'
         return f"<{tag} {attributes} {where}"
 
-    # byte sizes of the appended arrays, each after its UInt64 count
-    sizes = [len(strings), n_points * 3 * (8 if double else 4), n_cells * size * 8, n_cells * 8]
+    # per-vertex attributes, Float32: (name, (V, k) array)
+    point_data = []
+    if mesh.normals is not None:
+        point_data.append(("Normals", mesh.normals))
+    if mesh.values is not None:
+        point_data.append(("value", mesh.values.reshape(-1, 1)))
+    # byte sizes of the appended arrays (in file order), each after its UInt64 count
+    sizes = [len(strings)]
+    sizes += [n_points * data.shape[1] * 4 for _, data in point_data]
+    sizes += [n_points * 3 * (8 if double else 4), n_cells * size * 8, n_cells * 8]
     starts = np.concatenate([[0], np.cumsum(np.asarray(sizes) + 8)[:-1]]).tolist()
-    offsets = [None] * 4 if ascii else starts
+    offsets = iter([None] * len(sizes) if ascii else starts)
     counts = {"Verts": 0, "Lines": 0, "Strips": 0, "Polys": 0}
     counts[section] = n_cells
     piece = " ".join(f'NumberOf{name}="{n}"' for name, n in counts.items())
@@ -99,74 +111,67 @@ def write_vtp(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
         + array(
             "Array",
             f'type="String" Name="{FIELD_NAME}" NumberOfTuples="{len(lines)}"',
-            offsets[0],
+            next(offsets),
         ),
     ]
     if ascii:
         # the string array as the byte codes of its NUL-terminated strings (as VTK writes it)
         head += ["        " + " ".join(str(b) for b in strings), "      </Array>"]
+    head += ["    </FieldData>", f'    <Piece NumberOfPoints="{n_points}" {piece}>']
+    # a list of text pieces and arrays, in file order: text is written as it is,
+    # arrays as appended binary or as ASCII rows
+    parts: list = []
+    if point_data:
+        roles = {"Normals": "Normals", "value": "Scalars"}
+        named = " ".join(f'{roles[name]}="{name}"' for name, _ in point_data)
+        head.append(f"      <PointData {named}>")
+        for name, data in point_data:
+            comps = f' NumberOfComponents="{data.shape[1]}"' if data.shape[1] > 1 else ""
+            attrs = f'type="Float32" Name="{name}"{comps}'
+            head.append("        " + array("DataArray", attrs, next(offsets)))
+            parts += ["\n".join(head), (data, np.float32, "%.9g")]
+            head = ["        </DataArray>"] if ascii else []
+        head.append("      </PointData>")
+    kind_of_points = f'type="{kind}" Name="Points" NumberOfComponents="3"'
+    head += ["      <Points>", "        " + array("DataArray", kind_of_points, next(offsets))]
+    digits = "%.17g" if double else "%.9g"
+    parts += ["\n".join(head), (verts, np.float64 if double else np.float32, digits)]
+    head = ["        </DataArray>"] if ascii else []
     head += [
-        "    </FieldData>",
-        f'    <Piece NumberOfPoints="{n_points}" {piece}>',
-        "      <Points>",
-        "        "
-        + array("DataArray", f'type="{kind}" Name="Points" NumberOfComponents="3"', offsets[1]),
-    ]
-    if not ascii:
-        head += [
-            "      </Points>",
-            f"      <{section}>",
-            "        " + array("DataArray", 'type="Int64" Name="connectivity"', offsets[2]),
-            "        " + array("DataArray", 'type="Int64" Name="offsets"', offsets[3]),
-            f"      </{section}>",
-            "    </Piece>",
-            "  </PolyData>",
-            '  <AppendedData encoding="raw">',
-            "   _",
-        ]
-        fh.write("\n".join(head).encode("ascii"))
-        fh.write(np.uint64(len(strings)).tobytes() + strings)
-        fh.write(np.uint64(sizes[1]).tobytes())
-        for block in row_chunks(verts):
-            fh.write(block.astype("<f8" if double else "<f4", copy=False).tobytes())
-        fh.write(np.uint64(sizes[2]).tobytes())
-        for block in row_chunks(cells):
-            fh.write(block.astype("<i8", copy=False).tobytes())
-        fh.write(np.uint64(sizes[3]).tobytes())
-        for block in _offsets(n_cells, size):
-            fh.write(block.astype("<i8", copy=False).tobytes())
-        fh.write(b"\n  </AppendedData>\n</VTKFile>\n")
-        return
-    fh.write(("\n".join(head) + "\n").encode("ascii"))
-    # 17 significant digits give a double back exactly, 9 a float
-    digits = 17 if double else 9
-    stored = np.float64 if double else np.float32
-    write_rows(fh, verts, f"%.{digits}g %.{digits}g %.{digits}g\n", dtype=stored)
-    tail = [
-        "        </DataArray>",
         "      </Points>",
         f"      <{section}>",
-        "        " + array("DataArray", 'type="Int64" Name="connectivity"', None),
+        "        " + array("DataArray", 'type="Int64" Name="connectivity"', next(offsets)),
     ]
-    fh.write(("\n".join(tail) + "\n").encode("ascii"))
-    write_rows(fh, cells, " ".join(["%d"] * size) + "\n")
-    fh.write(
-        (
-            "        </DataArray>\n        "
-            + array("DataArray", 'type="Int64" Name="offsets"', None)
-            + "\n"
-        ).encode("ascii")
-    )
-    for block in _offsets(n_cells, size):
-        write_rows(fh, block.reshape(-1, 1), "%d\n")
-    tail = [
-        "        </DataArray>",
-        f"      </{section}>",
-        "    </Piece>",
-        "  </PolyData>",
-        "</VTKFile>",
-    ]
-    fh.write(("\n".join(tail) + "\n").encode("ascii"))
+    parts += ["\n".join(head), (cells, np.int64, "%d")]
+    head = ["        </DataArray>"] if ascii else []
+    head.append("        " + array("DataArray", 'type="Int64" Name="offsets"', next(offsets)))
+    parts += ["\n".join(head), ("offsets", np.int64, "%d")]
+    head = ["        </DataArray>"] if ascii else []
+    head += [f"      </{section}>", "    </Piece>", "  </PolyData>"]
+    if ascii:
+        for part in parts:
+            if isinstance(part, str):
+                fh.write((part + "\n").encode("ascii"))
+            elif isinstance(part[0], str):
+                for block in _offsets(n_cells, size):
+                    write_rows(fh, block.reshape(-1, 1), "%d\n")
+            else:
+                data, dtype, number = part
+                write_rows(fh, data, " ".join([number] * data.shape[1]) + "\n", dtype=dtype)
+        fh.write(("\n".join([*head, "</VTKFile>"]) + "\n").encode("ascii"))
+        return
+    text = "\n".join(p for p in parts if isinstance(p, str) and p)
+    head += ['  <AppendedData encoding="raw">', "   _"]
+    fh.write((text + "\n" + "\n".join(head)).encode("ascii"))
+    fh.write(np.uint64(len(strings)).tobytes() + strings)
+    little = {np.float32: "<f4", np.float64: "<f8", np.int64: "<i8"}
+    blocks = [p for p in parts if not isinstance(p, str)]
+    for (data, dtype, _), nbytes in zip(blocks, sizes[1:], strict=True):
+        fh.write(np.uint64(nbytes).tobytes())
+        chunks = _offsets(n_cells, size) if isinstance(data, str) else row_chunks(data)
+        for block in chunks:
+            fh.write(block.astype(little[dtype], copy=False).tobytes())
+    fh.write(b"\n  </AppendedData>\n</VTKFile>\n")
 
 
 def _offsets(n_cells: int, size: int):

@@ -1,0 +1,202 @@
+"""Per-vertex attributes sampled from a volume: normals and values.
+
+Both come from trilinear interpolation at the vertices (the compiled
+``sample_points`` kernel), a cheap second pass after extraction that reads the
+volume slab by slab again, so it works on every volume the extraction does,
+larger than memory included. At an isosurface vertex (which lies on a grid
+edge) trilinear interpolation is linear interpolation along that edge: the
+normals are the central-difference gradients at the edge's two samples mixed
+by the vertex's place on the edge, as VTK's contour filters and scikit-image
+compute them. At vertices that smoothing or decimation moved, it is the
+gradient field of the trilinear interpolant.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import VolumeError
+from .extract.prepare import kernel_type
+from .grid import grid_slab_zyx
+from .mesh import Mesh
+from .threads import kernel_threads
+from .volume import Volume
+from .writers.chunks import row_chunks
+
+#: Grid layers read at a time when the volume is read from its file.
+SLAB_LAYERS = 64
+
+#: How far outside a grid (in samples) a point may be and still be sampled on
+#: its face (rounding of world coordinates); beyond it, the value is NaN.
+SLACK = 1e-6
+
+
+def check_3d(volume: Volume, what: str) -> None:
+    """Refuse a volume that per-vertex ``what`` ("normals", "values") cannot come from."""
+    if volume.ndim != 3 or any(n < 2 for n in volume.shape):
+        raise VolumeError(
+            f"{volume.source}: {what} need a 3D volume with at least 2 samples along every "
+            f"axis, got shape {volume.shape}"
+        )
+
+
+def _sample(
+    volume: Volume,
+    vertices: np.ndarray,
+    gradient: bool,
+    nan_as: float | None,
+    sign: float = 1.0,
+) -> np.ndarray:
+    """Trilinear values ``(V,)`` or unit world gradients times ``sign`` ``(V, 3)``
+    (zero where the gradient vanishes), float32, of ``volume`` at world points
+    ``vertices (V, 3)``; NaN outside the grid."""
+    from . import _native
+
+    out = np.empty((len(vertices), 3) if gradient else len(vertices), dtype=np.float32)
+    depth = volume.shape[2]
+    to_index = np.linalg.inv(volume.affine)
+    origin = np.ascontiguousarray(volume.origin, dtype=np.float64)
+    # (row vectors) index = (world - origin) @ inv(affine).T; d/d(world) = d/d(index) @ inv(affine)
+    maps = (origin, np.ascontiguousarray(to_index.T), np.ascontiguousarray(to_index))
+    threads = kernel_threads()
+
+    def run(zyx: np.ndarray, k0: int, points: np.ndarray, into: np.ndarray) -> None:
+        _native.sample_points(
+            kernel_type(zyx, volume.source),
+            k0,
+            depth,
+            np.ascontiguousarray(points, dtype=np.float64),
+            *maps,
+            sign,
+            gradient,
+            gradient,
+            nan_as is not None,
+            float(nan_as or 0.0),
+            SLACK,
+            threads,
+            into,
+        )
+
+    if volume.grid is None:
+        zyx = volume.data.T
+        start = 0
+        for block in row_chunks(vertices):
+            run(zyx, 0, block, out[start : start + len(block)])
+            start += len(block)
+        return out
+
+    # A file-backed volume: take vertices in order of the grid layer below
+    # them and read only the slabs (with the layers their stencils reach) that
+    # hold some.
+    layer = np.empty(len(vertices), dtype=np.int64)
+    start = 0
+    for block in row_chunks(vertices):
+        z = (block - origin) @ to_index[2]
+        z = np.nan_to_num(z, nan=0.0, posinf=depth - 1, neginf=0.0)
+        layer[start : start + len(block)] = np.clip(np.floor(z), 0, depth - 1)
+        start += len(block)
+    # vertices of extracted meshes come in layer order: then slabs are ranges
+    in_order = bool(np.all(layer[1:] >= layer[:-1]))
+    order = None if in_order else np.argsort(layer, kind="stable")
+    cuts = np.arange(0, depth + SLAB_LAYERS, SLAB_LAYERS)
+    bounds = np.searchsorted(layer if in_order else layer[order], cuts)
+    for s, k in enumerate(range(0, depth, SLAB_LAYERS)):
+        a, b = bounds[s], bounds[s + 1]
+        these = slice(a, b) if in_order else order[a:b]
+        if a == b:
+            continue
+        # a cell's corners reach one layer up; a gradient one more each way
+        lo, hi = max(0, k - 1), min(depth, k + SLAB_LAYERS + 2)
+        if in_order:
+            run(grid_slab_zyx(volume.samples, lo, hi), lo, vertices[these], out[these])
+            continue
+        result = np.empty((b - a, 3) if gradient else b - a, dtype=np.float32)
+        run(grid_slab_zyx(volume.samples, lo, hi), lo, vertices[these], result)
+        out[these] = result
+    return out
+
+
+def vertex_normals(
+    mesh: Mesh, volume: Volume, *, flip: bool = False, nan_as: float | None = None
+) -> np.ndarray:
+    """Unit normals at the vertices of a surface extracted from ``volume``.
+
+    The negated gradient of the volume in world coordinates, so that normals
+    point from the positive side (values >= level) to the negative side, like
+    the triangles (the other way with ``flip``). Where the gradient vanishes
+    (a flat neighbourhood), the area-weighted mean of the normals of the
+    vertex's triangles stands in.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        ``vertices (V, 3)`` in world units, ``cells (C, 3)``.
+    volume : Volume
+        The 3D volume the mesh was extracted from (its placement included).
+    flip : bool
+        The mesh was extracted with ``flip``.
+    nan_as : float or None
+        The value NaN/Inf samples stood for in the extraction.
+
+    Returns
+    -------
+    normals : (V, 3) float32
+    """
+    check_3d(volume, "normals")
+    if not mesh.is_triangles:
+        raise VolumeError("normals need a triangle mesh; contours (squares) have none")
+    normals = _sample(volume, mesh.vertices, True, nan_as, sign=1.0 if flip else -1.0)
+    flat = ~normals.any(axis=1)
+    flat |= np.isnan(normals[:, 0])
+    if flat.any():
+        normals[flat] = _face_normals_at(mesh, flat)
+    return normals
+
+
+def _face_normals_at(mesh: Mesh, wanted: np.ndarray) -> np.ndarray:
+    """Area-weighted mean triangle normals ``(n, 3)`` at the vertices ``wanted``
+    (a (V,) mask); zero where no triangle of positive area touches one."""
+    cells = np.asarray(mesh.cells)
+    touching = wanted[cells].any(axis=1)
+    tri = cells[touching]
+    v = mesh.vertices
+    cross = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])
+    total = np.zeros((len(v), 3))
+    for corner in range(3):
+        for axis in range(3):
+            total[:, axis] += np.bincount(tri[:, corner], cross[:, axis], minlength=len(v))
+    picked = total[wanted]
+    length = np.linalg.norm(picked, axis=1)
+    nonzero = length > 0
+    picked[nonzero] /= length[nonzero, np.newaxis]
+    return picked
+
+
+def vertex_values(mesh: Mesh, volume: Volume, *, nan_as: float | None = None) -> np.ndarray:
+    """Values of ``volume`` at the vertices of ``mesh``, by trilinear interpolation
+    in world coordinates.
+
+    The volume may be another scan than the one the mesh came from (colour a
+    bone surface by a PET scan, or by a distance map), on its own grid: each
+    vertex is placed in it through its spacing, origin and direction. When both
+    state an anatomical frame, give them the same one (:meth:`Volume.in_frame`).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        ``vertices (V, 3)`` in world units.
+    volume : Volume
+        A 3D volume.
+    nan_as : float or None
+        Value its NaN/Inf samples stand for; None leaves them NaN.
+
+    Returns
+    -------
+    values : (V,) float32
+        NaN at vertices outside the volume's grid.
+    """
+    check_3d(volume, "values")
+    return _sample(volume, mesh.vertices, False, nan_as)
+
+
+__all__ = ["vertex_normals", "vertex_values"]
