@@ -119,8 +119,9 @@ READERS.register(
     "dicom",
     Reader(
         "dicom",
-        "DICOM series via pydicom: a folder of slices or one .dcm file of it (sorted by "
-        "position, rescaled to HU, LPS; --series UID picks one of several)",
+        "DICOM via pydicom: a folder of slices or one .dcm file of it, or an enhanced "
+        "multi-frame file (sorted by position, rescaled to HU, LPS; --series UID picks one "
+        "of several)",
         (".dcm", ".dicom"),
         LazyFunction("isoconvert.readers.dicom:read_dicom"),
         frozenset({"series"}),
