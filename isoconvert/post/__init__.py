@@ -1,0 +1,1 @@
+"""Post-processing: smoothing, decimation, components, capping (Mesh in, Mesh out)."""

@@ -1,0 +1,101 @@
+"""isoconvert.post.decimate: meshoptimizer's quadric decimation with a measured error bound."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+import trimesh
+from conftest import ball, dataset, edge_use
+
+from isoconvert import extract, read_volume
+from isoconvert.errors import IsoconvertError
+from isoconvert.report import check_mesh
+from isoconvert.volume import Volume
+
+pytest.importorskip("meshoptimizer", reason="the simplify extra: pip install isoconvert[simplify]")
+pytest.importorskip("rtree", reason="trimesh.proximity needs rtree")
+from isoconvert.post.decimate import decimate  # noqa: E402
+
+ENGINE = "engine_256x256x128_uint8.raw"
+
+
+@pytest.fixture(scope="module")
+def engine():
+    return extract(read_volume(dataset(ENGINE)), 80.5)
+
+
+def boundary_segments(mesh) -> np.ndarray:
+    """(B, 6) rows in sorted order: the two end positions (lexicographically
+    smaller first) of each edge used by one triangle."""
+    edges, counts = edge_use(mesh.cells)
+    ends = mesh.vertices[edges[counts == 1]]  # (B, 2, 3)
+    a, b = ends[:, 0], ends[:, 1]
+    diff = a - b
+    first_nonzero = np.argmax(diff != 0, axis=1)
+    a_first = diff[np.arange(len(diff)), first_nonzero] <= 0
+    rows = np.where(a_first[:, None], np.hstack([a, b]), np.hstack([b, a]))
+    return rows[np.lexsort(rows.T[::-1])]
+
+
+def test_engine_90_percent_keeps_manifold_components_and_count(engine):
+    before = check_mesh(engine)
+    out = decimate(engine, reduction=0.9)
+    after = check_mesh(out)
+    target = 0.1 * engine.n_cells
+    assert abs(out.n_cells - target) <= 0.03 * target
+    assert before.checks["manifold"] and after.checks["manifold"]
+    assert after.checks["oriented"] and after.checks["no-holes"]
+    assert after.topology["components"] == before.topology["components"]
+    # the open boundary at the grid's faces keeps every edge
+    key = "boundary_edges_on_domain_boundary"
+    assert after.problems[key]["count"] == before.problems[key]["count"]
+    assert out.edge_ids is None
+    assert out.info["decimation"]["triangles_after"] == out.n_cells
+    assert out.info["source"] == engine.info["source"]
+
+
+def test_engine_max_error_holds_measured_by_trimesh(engine):
+    limit = 0.5
+    out = decimate(engine, max_error=limit)
+    assert out.n_cells < 0.2 * engine.n_cells  # it did decimate
+    rng = np.random.default_rng(1)
+    # the result's vertices lie on the original surface
+    original = trimesh.Trimesh(engine.vertices, engine.cells, process=False)
+    sub = rng.choice(out.n_vertices, min(3000, out.n_vertices), replace=False)
+    _, dist, _ = trimesh.proximity.closest_point(original, out.vertices[sub])
+    assert dist.max() <= 1e-9
+    # and every original vertex (a sample) lies within the limit of the result
+    result = trimesh.Trimesh(out.vertices, out.cells, process=False)
+    sub = rng.choice(engine.n_vertices, 20000, replace=False)
+    _, dist, _ = trimesh.proximity.closest_point(result, engine.vertices[sub])
+    assert dist.max() <= limit + 1e-9
+    assert out.info["decimation"]["max_vertex_deviation"] <= limit
+    assert check_mesh(out).checks["manifold"]
+
+
+def test_open_ball_boundary_unchanged():
+    # a ball cut by the grid's low z face: its surface is open there
+    field = ball(32, 12.3, center=(15.5, 15.2, 3.0))
+    mesh = extract(Volume(field), 0.0)
+    assert (edge_use(mesh.cells)[1] == 1).any(), "the test needs an open mesh"
+    out = decimate(mesh, reduction=0.8)
+    assert out.n_cells < 0.3 * mesh.n_cells
+    assert np.array_equal(boundary_segments(out), boundary_segments(mesh))
+
+
+def test_missing_extra_names_the_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "meshoptimizer", None)  # import now fails
+    mesh = extract(Volume(ball(12, 4.2)), 0.0)
+    with pytest.raises(IsoconvertError, match=r"pip install isoconvert\[simplify\]"):
+        decimate(mesh, reduction=0.5)
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{}, {"reduction": 1.0}, {"reduction": -0.1}, {"max_error": 0.0}]
+)
+def test_bad_parameters(kwargs):
+    mesh = extract(Volume(ball(12, 4.2)), 0.0)
+    with pytest.raises(IsoconvertError, match="decimate"):
+        decimate(mesh, **kwargs)
