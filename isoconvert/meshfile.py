@@ -1,9 +1,11 @@
-"""Reading mesh files (PLY, OBJ, OFF, STL) for ``isoconvert check``.
+"""Reading mesh files (PLY, OBJ, OFF, STL, VTP, GLB, 3MF) for ``isoconvert check``.
 
-PLY, OBJ and OFF are read here, so that vertices and cells come back exactly as the
-file holds them (the file's vertex indices, nothing merged, reordered or
-dropped) and so that a header's grid record and a bad vertex index can be
-told; STL, which has no indices, is read by trimesh.
+PLY, OBJ, OFF, VTP, GLB and 3MF are read here, with the standard library and
+numpy only (VTK and trimesh are test extras, never needed at run time), so
+that vertices and cells come back exactly as the file holds them (the file's
+vertex indices, nothing merged, reordered or dropped) and so that a header's
+grid record and a bad vertex index can be told; STL, which has no indices, is
+read by trimesh.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from .errors import FormatError, InputNotFoundError, one_line
 from .mesh import Mesh
 from .writers.header import parse_grid_comment
 
-MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
+MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl", ".vtp", ".glb", ".3mf")
 
 #: A PLY header longer than this is not one (a binary file without end_header).
 _MAX_HEADER_BYTES = 1 << 24
@@ -45,12 +47,14 @@ _PLY_TYPES = {
 
 
 def read_mesh(path: str | Path) -> Mesh:
-    """Read triangles, or contour segments, from a PLY, OBJ or STL file.
+    """Read triangles, or contour segments, from a PLY, OBJ, OFF, STL, VTP, GLB or 3MF file.
 
-    Vertices and cells come back as the file holds them: PLY and OBJ with the
-    file's vertex order and indices (polygons split into fans of triangles),
-    STL with three vertices per triangle (trimesh, ``process=False``); the
-    report merges equal positions itself and says how many it merged.
+    Vertices and cells come back as the file holds them: PLY, OBJ, OFF, VTP,
+    GLB and 3MF with the file's vertex order and indices (polygons split into
+    fans of triangles; several VTP pieces, glTF primitives or 3MF objects one
+    after the other, placed by their node or build transforms), STL with three
+    vertices per triangle (trimesh, ``process=False``); the report merges
+    equal positions itself and says how many it merged.
 
     Parameters
     ----------
@@ -62,9 +66,13 @@ def read_mesh(path: str | Path) -> Mesh:
         ``vertices (V, 3) float64`` (values of the stored precision) and
         ``cells (C, 3)`` or ``(C, 2)`` int64 with indices in ``0..V-1``.
         ``info`` has ``source`` (the path), ``stored_precision`` ("float32"
-        for PLY ``float`` coordinates and STL, "float64" for PLY ``double`` or
-        integer coordinates and for OBJ) and, when a PLY or OBJ header records
-        a well-formed grid (``isoconvert grid {...}``), ``grid``.
+        for PLY ``float`` coordinates, VTP ``Float32`` points, GLB and STL;
+        "float64" for PLY ``double`` or integer coordinates, OBJ, OFF and VTP
+        ``Float64``; for 3MF's text, float32 when every coordinate is a float32
+        value) and, when the file records a well-formed grid as isoconvert's
+        writers do (PLY/OBJ/OFF header comment, VTP comment or ``isoconvert``
+        field array, GLB ``asset.extras``, 3MF ``isoconvert:grid`` metadata),
+        ``grid``.
 
     Raises
     ------
@@ -86,10 +94,26 @@ def read_mesh(path: str | Path) -> Mesh:
         )
     if suffix == ".stl":
         return _read_stl(path)
-    reader = {".ply": _read_ply, ".obj": _read_obj, ".off": _read_off}[suffix]
+    reader = {
+        ".ply": _read_ply,
+        ".obj": _read_obj,
+        ".off": _read_off,
+        ".vtp": _read_vtp,
+        ".glb": _read_glb,
+        ".3mf": _read_3mf,
+    }[suffix]
     try:
         return reader(path)
-    except (_Unreadable, ValueError, TypeError, KeyError, IndexError, OverflowError) as exc:
+    except (
+        _Unreadable,
+        ValueError,
+        TypeError,
+        KeyError,
+        IndexError,
+        OverflowError,
+        AttributeError,
+        RecursionError,
+    ) as exc:
         # a file broken in a way the reader does not name
         raise FormatError(
             f"{path}: not a readable {suffix[1:].upper()} mesh ({one_line(exc)})"
@@ -723,3 +747,627 @@ def _read_off(path: Path) -> Mesh:
     if grid is not None:
         info["grid"] = grid
     return Mesh(vertices, cells, info=info)
+
+
+# --- VTP (VTK XML PolyData) ------------------------------------------------------------------
+
+_VTK_TYPES = {
+    "Int8": "i1",
+    "UInt8": "u1",
+    "Int16": "i2",
+    "UInt16": "u2",
+    "Int32": "i4",
+    "UInt32": "u4",
+    "Int64": "i8",
+    "UInt64": "u8",
+    "Float32": "f4",
+    "Float64": "f8",
+    # a string array is its NUL-terminated strings' bytes
+    "String": "u1",
+}
+_XML_COMMENT = re.compile(rb"<!--(.*?)-->", re.DOTALL)
+
+
+@dataclass
+class _VtkData:
+    """How a VTK XML file encodes its binary arrays, and its appended data."""
+
+    order: str  # "<" or ">"
+    header: str  # numpy code of the block headers: "u4" or "u8"
+    compressor: str | None  # "zlib", "lzma" or None
+    appended: bytes | memoryview  # bytes after the "_" of <AppendedData>, or b""
+    appended_base64: bool
+
+
+def _tag(element) -> str:
+    """An XML element's name without its namespace."""
+    return element.tag.rsplit("}", 1)[-1]
+
+
+def _read_vtp(path: Path) -> Mesh:
+    """VTK XML PolyData: every Piece's Points and Polys (triangles; polygons as
+    fans) or Lines (polylines as segments); ascii, inline base64 and appended
+    (raw or base64) arrays, uncompressed or zlib/lzma-compressed, UInt32 or
+    UInt64 block headers, either byte order."""
+    from xml.etree import ElementTree
+
+    with open(path, "rb") as fh:
+        data = _mapped(fh, 0)
+    blob = bytes(data[: min(len(data), _MAX_HEADER_BYTES)])
+    start = blob.find(b"<AppendedData")
+    appended: bytes | memoryview = b""
+    base64_data = False
+    if start >= 0:
+        # the appended section is not XML: parse what comes before it, closed off
+        tag_end = blob.find(b">", start)
+        marker = blob.find(b"_", tag_end)
+        if tag_end < 0 or marker < 0:
+            raise _Unreadable("its AppendedData section has no '_' where its data starts")
+        encoding = re.search(rb'encoding\s*=\s*["\'](\w+)["\']', blob[start:tag_end])
+        base64_data = bool(encoding) and encoding.group(1) == b"base64"
+        appended = data[marker + 1 :]
+        # the closing tags after the data: without them the file was cut short
+        if b"</VTKFile>" not in bytes(data[max(marker, len(data) - 4096) :]):
+            raise _Unreadable("it ends before </VTKFile> (a truncated file?)")
+        xml = blob[:start] + b"</VTKFile>"
+    else:
+        xml = bytes(data)
+    try:
+        root = ElementTree.fromstring(xml)
+    except ElementTree.ParseError as exc:
+        raise _Unreadable(f"not well-formed XML ({exc})") from None
+    if _tag(root) != "VTKFile" or root.get("type") != "PolyData":
+        raise _Unreadable('not a VTK XML PolyData file (no <VTKFile type="PolyData">)')
+    compressor = root.get("compressor")
+    known = {None: None, "vtkZLibDataCompressor": "zlib", "vtkLZMADataCompressor": "lzma"}
+    if compressor not in known:
+        raise _Unreadable(f"compressor {compressor} is not supported (zlib and lzma are)")
+    header = {"UInt32": "u4", "UInt64": "u8"}.get(root.get("header_type", "UInt32"))
+    if header is None:
+        raise _Unreadable(f"unknown header_type {root.get('header_type')!r}")
+    order = ">" if root.get("byte_order") == "BigEndian" else "<"
+    vtk = _VtkData(order, header, known[compressor], appended, base64_data)
+    polydata = next((e for e in root if _tag(e) == "PolyData"), None)
+    if polydata is None:
+        raise _Unreadable("no PolyData element")
+    comments = [m.group(1).strip().decode("utf-8", "replace") for m in _XML_COMMENT.finditer(xml)]
+    comments += _vtp_field_strings(polydata, vtk)
+    points_list, cells_list, kinds = [], [], set()
+    n = 0
+    precision = "float32"
+    for piece in (e for e in polydata if _tag(e) == "Piece"):
+        count = int(piece.get("NumberOfPoints", "0"))
+        points = _vtk_section(piece, "Points")
+        if count and points is None:
+            raise _Unreadable("a Piece has points but no Points element")
+        if count:
+            array = next((e for e in points if _tag(e) == "DataArray"), None)
+            if array is None:
+                raise _Unreadable("its Points element has no DataArray")
+            if array.get("type") != "Float32":
+                precision = "float64"
+            values = _vtk_array(array, vtk, count * 3)
+            points_list.append(values.astype(np.float64).reshape(count, 3))
+        if int(piece.get("NumberOfStrips", "0")):
+            raise _Unreadable("it holds triangle strips, which check does not read")
+        for section, size in (("Polys", 3), ("Lines", 2)):
+            number = int(piece.get(f"NumberOf{section}", "0"))
+            element = _vtk_section(piece, section)
+            if not number or element is None:
+                continue
+            arrays = {e.get("Name"): e for e in element if _tag(e) == "DataArray"}
+            if "connectivity" not in arrays or "offsets" not in arrays:
+                raise _Unreadable(f"its {section} lack a connectivity or offsets array")
+            offsets = _vtk_array(arrays["offsets"], vtk, number).astype(np.int64)
+            total = int(offsets[-1])
+            indices = _vtk_array(arrays["connectivity"], vtk, total).astype(np.int64)
+            sizes = np.diff(np.concatenate([[0], offsets]))
+            if (sizes < 0).any():
+                raise _Unreadable(f"the offsets of its {section} decrease")
+            cells, _ = _obj_fan(path, indices, sizes, size)
+            cells_list.append(cells + n)
+            kinds.add(size)
+        n += count
+    if not cells_list:
+        raise FormatError(f"{path}: holds no triangles or segments")
+    if len(kinds) > 1:
+        raise _Unreadable("it holds both polygons and lines; check reads one kind")
+    vertices = np.concatenate(points_list) if points_list else np.zeros((0, 3))
+    cells = np.concatenate(cells_list)
+    _check_indices(path, cells, len(vertices), "polygon" if 3 in kinds else "line")
+    info: dict = {"source": str(path), "stored_precision": precision}
+    grid = _first_grid(comments)
+    if grid is not None:
+        info["grid"] = grid
+    return Mesh(vertices, cells, info=info)
+
+
+def _check_indices(path: Path, cells: np.ndarray, n: int, kind: str) -> None:
+    """A FormatError naming the first cell that refers to a vertex that does not exist."""
+    if cells.size and (cells.min() < 0 or cells.max() >= n):
+        bad = (cells < 0) | (cells >= n)
+        row = int(np.flatnonzero(bad.any(axis=1))[0])
+        index = int(cells[row][bad[row]][0])
+        raise FormatError(f"{path}: {kind} {row} refers to vertex {index}, {_why(index, n)}")
+
+
+def _vtk_section(piece, name: str):
+    return next((e for e in piece if _tag(e) == name), None)
+
+
+def _vtp_field_strings(polydata, vtk: _VtkData) -> list[str]:
+    """The strings of a FieldData String array named ``isoconvert`` (our writer
+    records its provenance and grid there too; VTK keeps it when it rewrites
+    the file, where the XML comments are lost)."""
+    field_data = _vtk_section(polydata, "FieldData")
+    if field_data is None:
+        return []
+    for array in field_data:
+        if array.get("type") == "String" and array.get("Name") == "isoconvert":
+            try:
+                raw = _vtk_array(array, vtk, None)
+            except _Unreadable:
+                return []  # metadata only: a mesh without it is still a mesh
+            return [s.decode("utf-8", "replace") for s in raw.tobytes().split(b"\0") if s]
+    return []
+
+
+def _vtk_array(array, vtk: _VtkData, count: int | None) -> np.ndarray:
+    """The values (1D) of a DataArray; ``count`` values expected (None: any)."""
+    kind = array.get("type")
+    if kind not in _VTK_TYPES:
+        raise _Unreadable(f"DataArray type {kind!r} is not supported")
+    name = array.get("Name", kind)
+    dtype = np.dtype(vtk.order + _VTK_TYPES[kind])
+    form = array.get("format", "ascii")
+    if form == "ascii":
+        text = (array.text or "").encode("ascii", "replace")
+        values = _numbers(text)
+        if values is None:
+            raise _Unreadable(f"its {name} array holds something other than numbers")
+        values = values.astype(dtype.newbyteorder("="))
+    elif form == "binary":
+        values = _vtk_binary(
+            _base64_chars((array.text or "").encode("ascii", "replace")), vtk, dtype, name
+        )
+    elif form == "appended":
+        offset = int(array.get("offset", "0"))
+        if offset < 0 or offset >= len(vtk.appended):
+            raise _Unreadable(f"the file ends before its {name} array")
+        source = vtk.appended[offset:]
+        if vtk.appended_base64:
+            values = _vtk_binary(_base64_chars(bytes(source)), vtk, dtype, name)
+        else:
+            values = _vtk_raw(source, vtk, dtype, name)
+    else:
+        raise _Unreadable(f"unknown DataArray format {form!r}")
+    if count is not None and len(values) < count:
+        raise _Unreadable(f"its {name} array has {len(values)} values, {count} expected")
+    return values if count is None else values[:count]
+
+
+def _base64_chars(text: bytes) -> bytes:
+    """Base64 text without the whitespace XML puts around it."""
+    return b"".join(text.split())
+
+
+def _vtk_raw(source, vtk: _VtkData, dtype: np.dtype, name: str) -> np.ndarray:
+    """An appended raw array: a header (byte count, or compression blocks) and the data."""
+    head = np.dtype(vtk.order + vtk.header)
+    truncated = _Unreadable(f"the file ends inside its {name} array")
+    if vtk.compressor is None:
+        if len(source) < head.itemsize:
+            raise truncated
+        size = int(np.frombuffer(source, head, 1)[0])
+        if head.itemsize + size > len(source):
+            raise truncated
+        return np.frombuffer(source, dtype, size // dtype.itemsize, head.itemsize)
+    if len(source) < 3 * head.itemsize:
+        raise truncated
+    blocks = int(np.frombuffer(source, head, 1)[0])
+    if (3 + blocks) * head.itemsize > len(source):
+        raise truncated
+    sizes = np.frombuffer(source, head, 3 + blocks).astype(np.int64)
+    start = (3 + blocks) * head.itemsize
+    if start + int(sizes[3:].sum()) > len(source):
+        raise truncated
+    return _vtk_inflate(source, start, sizes, vtk, dtype, name)
+
+
+def _vtk_binary(text: bytes, vtk: _VtkData, dtype: np.dtype, name: str) -> np.ndarray:
+    """A base64 array (inline or appended): uncompressed, the count and the data
+    are one base64 stream; compressed, the block header is encoded on its own."""
+    import base64
+    import binascii
+
+    head = np.dtype(vtk.order + vtk.header)
+    truncated = _Unreadable(f"the file ends inside its {name} array")
+    try:
+        if vtk.compressor is None:
+            # appended base64 arrays follow each other: decode only this one
+            first = base64.b64decode(text[: 4 * -(-head.itemsize // 3)])
+            size = int(np.frombuffer(first, head, 1)[0])
+            needed = 4 * -(-(head.itemsize + size) // 3)
+            if needed > len(text):
+                raise truncated
+            raw = base64.b64decode(text[:needed])
+            return np.frombuffer(raw, dtype, size // dtype.itemsize, head.itemsize)
+        first = base64.b64decode(text[: 4 * -(-head.itemsize // 3)])
+        blocks = int(np.frombuffer(first, head, 1)[0])
+        chars = 4 * -(-(3 + blocks) * head.itemsize // 3)
+        if chars > len(text):
+            raise truncated
+        sizes = np.frombuffer(base64.b64decode(text[:chars]), head, 3 + blocks).astype(np.int64)
+        needed = 4 * -(-int(sizes[3:].sum()) // 3)
+        if chars + needed > len(text):
+            raise truncated
+        raw = base64.b64decode(text[chars : chars + needed])
+    except (binascii.Error, ValueError) as exc:
+        raise _Unreadable(f"its {name} array is not valid base64 ({exc})") from None
+    return _vtk_inflate(raw, 0, sizes, vtk, dtype, name)
+
+
+def _vtk_inflate(
+    source, start: int, sizes: np.ndarray, vtk: _VtkData, dtype: np.dtype, name: str
+) -> np.ndarray:
+    """Decompress the blocks of a compressed array. ``sizes`` is the header:
+    number of blocks, block size, size of the last block (0: a full one), the
+    compressed size of each block."""
+    import lzma
+    import zlib
+
+    blocks, block_size, last = int(sizes[0]), int(sizes[1]), int(sizes[2])
+    decompress = zlib.decompress if vtk.compressor == "zlib" else lzma.decompress
+    parts = []
+    for number, size in enumerate(sizes[3:].tolist()):
+        try:
+            part = decompress(bytes(source[start : start + size]))
+        except (zlib.error, lzma.LZMAError) as exc:
+            raise _Unreadable(f"its {name} array does not decompress ({exc})") from None
+        expected = last if number == blocks - 1 and last else block_size
+        if len(part) != expected:
+            raise _Unreadable(f"a block of its {name} array has the wrong size")
+        parts.append(part)
+        start += size
+    raw = b"".join(parts)
+    return np.frombuffer(raw, dtype, len(raw) // dtype.itemsize)
+
+
+# --- GLB (binary glTF 2.0) -------------------------------------------------------------------
+
+_GLTF_COMPONENTS = {5120: "i1", 5121: "u1", 5122: "i2", 5123: "u2", 5125: "u4", 5126: "f4"}
+_GLTF_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+_GLTF_TRIANGLES, _GLTF_LINES = 4, 1
+
+
+def _read_glb(path: Path) -> Mesh:
+    """GLB: the triangle (mode 4) or line (mode 1) primitives of the meshes the
+    default scene's nodes place, with the nodes' transforms; indexed or not."""
+    import json
+    import struct
+
+    data = path.read_bytes()
+    if len(data) < 20:
+        raise _Unreadable("shorter than a GLB header")
+    magic, version, total = struct.unpack_from("<III", data)
+    if magic != 0x46546C67:
+        raise _Unreadable("not a GLB file (it does not start with 'glTF')")
+    if version != 2:
+        raise _Unreadable(f"glTF version {version}; check reads glTF 2.0")
+    if total > len(data):
+        raise _Unreadable(f"its header says {total} bytes, but the file has {len(data)}")
+    chunks: list[tuple[int, bytes]] = []
+    offset = 12
+    while offset + 8 <= total:
+        length, kind = struct.unpack_from("<II", data, offset)
+        if offset + 8 + length > total:
+            raise _Unreadable("the file ends inside a chunk")
+        chunks.append((kind, data[offset + 8 : offset + 8 + length]))
+        offset += 8 + length
+    if not chunks or chunks[0][0] != 0x4E4F534A:
+        raise _Unreadable("its first chunk is not JSON")
+    try:
+        gltf = json.loads(chunks[0][1].decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise _Unreadable(f"its JSON chunk is not JSON ({exc})") from None
+    if not isinstance(gltf, dict):
+        raise _Unreadable("its JSON chunk is not a glTF object")
+    binary = next((chunk for kind, chunk in chunks[1:] if kind == 0x004E4942), None)
+    buffers = [_gltf_buffer(b, binary) for b in gltf.get("buffers", [])]
+    vertices_list, cells_list, kinds = [], [], set()
+    n = 0
+    transformed = False
+    for mesh_index, matrix in _gltf_instances(gltf):
+        mesh = gltf["meshes"][mesh_index]
+        for primitive in mesh.get("primitives", []):
+            mode = primitive.get("mode", _GLTF_TRIANGLES)
+            if mode not in (_GLTF_TRIANGLES, _GLTF_LINES):
+                raise _Unreadable(
+                    f"a primitive has mode {mode}; check reads triangles (4) and lines (1)"
+                )
+            if "POSITION" not in primitive.get("attributes", {}):
+                raise _Unreadable("a primitive has no POSITION attribute")
+            positions = _gltf_accessor(gltf, buffers, primitive["attributes"]["POSITION"])
+            if positions.ndim != 2 or positions.shape[1] != 3:
+                raise _Unreadable("its POSITION accessor is not VEC3")
+            with np.errstate(invalid="ignore", over="ignore"):  # the report names non-finite ones
+                positions = positions.astype(np.float64)
+            if not np.array_equal(matrix, np.eye(4)):
+                positions = positions @ matrix[:3, :3].T + matrix[:3, 3]
+                transformed = True
+            size = 3 if mode == _GLTF_TRIANGLES else 2
+            if "indices" in primitive:
+                indices = _gltf_accessor(gltf, buffers, primitive["indices"]).astype(np.int64)
+            else:
+                indices = np.arange(len(positions), dtype=np.int64)
+            if indices.size % size:
+                raise _Unreadable(f"a primitive's {indices.size} indices are no whole cells")
+            cells = indices.reshape(-1, size)
+            _check_indices(path, cells, len(positions), "triangle" if size == 3 else "segment")
+            vertices_list.append(positions)
+            cells_list.append(cells + n)
+            kinds.add(size)
+            n += len(positions)
+    if not cells_list or not sum(len(c) for c in cells_list):
+        raise FormatError(f"{path}: holds no triangles or segments")
+    if len(kinds) > 1:
+        raise _Unreadable("it holds both triangles and lines; check reads one kind")
+    info: dict = {
+        "source": str(path),
+        # float32 positions placed by a transform are float64 values
+        "stored_precision": "float64" if transformed else "float32",
+    }
+    extras = gltf.get("asset", {}).get("extras", {})
+    ours = extras.get("isoconvert") if isinstance(extras, dict) else None
+    if isinstance(ours, dict):
+        from .geometry import normalized_grid
+
+        grid = normalized_grid(ours.get("grid"))
+        if grid is not None:
+            info["grid"] = grid
+    return Mesh(np.concatenate(vertices_list), np.concatenate(cells_list), info=info)
+
+
+def _gltf_buffer(buffer: dict, binary: bytes | None) -> bytes:
+    """A buffer's bytes: the BIN chunk, or a base64 ``data:`` URI."""
+    import base64
+    import binascii
+
+    uri = buffer.get("uri")
+    if uri is None:
+        if binary is None:
+            raise _Unreadable("it has a buffer but no BIN chunk")
+        data = binary
+    elif uri.startswith("data:") and ";base64," in uri:
+        try:
+            data = base64.b64decode(uri.split(";base64,", 1)[1])
+        except binascii.Error as exc:
+            raise _Unreadable(f"a buffer's data URI is not base64 ({exc})") from None
+    else:
+        raise _Unreadable(f"a buffer refers to another file ({one_line(uri, 80)}), not read")
+    if len(data) < int(buffer.get("byteLength", 0)):
+        raise _Unreadable("a buffer is shorter than its byteLength (a truncated file?)")
+    return data
+
+
+def _gltf_accessor(gltf: dict, buffers: list[bytes], index: int) -> np.ndarray:
+    """The values of accessor ``index``: (count,) for SCALAR, (count, k) for VECk."""
+    accessor = gltf["accessors"][index]
+    if "sparse" in accessor:
+        raise _Unreadable("a sparse accessor, which check does not read")
+    code = _GLTF_COMPONENTS.get(accessor.get("componentType"))
+    width = _GLTF_WIDTH.get(accessor.get("type"))
+    if code is None or width is None:
+        raise _Unreadable(f"accessor {index} has an unsupported component type or type")
+    count = int(accessor["count"])
+    dtype = np.dtype("<" + code)
+    if "bufferView" not in accessor:  # glTF: all zeros
+        values = np.zeros((count, width), dtype)
+        return values[:, 0] if width == 1 else values
+    view = gltf["bufferViews"][accessor["bufferView"]]
+    data = buffers[view["buffer"]]
+    start = int(view.get("byteOffset", 0)) + int(accessor.get("byteOffset", 0))
+    stride = int(view.get("byteStride", 0)) or width * dtype.itemsize
+    end = start + (count - 1) * stride + width * dtype.itemsize if count else start
+    view_end = int(view.get("byteOffset", 0)) + int(view["byteLength"])
+    if start < 0 or end > min(len(data), view_end):
+        raise _Unreadable(f"accessor {index} reaches past the end of its buffer view")
+    if count == 0:
+        values = np.zeros((0, width), dtype)
+    else:
+        values = np.ndarray((count, width), dtype, data, start, (stride, dtype.itemsize))
+    return values[:, 0] if width == 1 else values
+
+
+def _gltf_instances(gltf: dict) -> list[tuple[int, np.ndarray]]:
+    """(mesh index, 4x4 world matrix) of every node with a mesh in the default
+    scene; every mesh, untransformed, when the file has no scene."""
+    meshes = gltf.get("meshes", [])
+    nodes = gltf.get("nodes", [])
+    scenes = gltf.get("scenes", [])
+    if not scenes:
+        return [(i, np.eye(4)) for i in range(len(meshes))]
+    scene = scenes[gltf.get("scene", 0)]
+    out: list[tuple[int, np.ndarray]] = []
+    stack = [(i, np.eye(4), 0) for i in scene.get("nodes", [])]
+    while stack:
+        index, parent, depth = stack.pop()
+        if depth > len(nodes):  # a cycle: glTF nodes form trees
+            raise _Unreadable("its nodes form a cycle")
+        node = nodes[index]
+        matrix = parent @ _gltf_local(node)
+        if "mesh" in node:
+            out.append((int(node["mesh"]), matrix))
+        stack.extend((child, matrix, depth + 1) for child in node.get("children", []))
+    return out
+
+
+def _gltf_local(node: dict) -> np.ndarray:
+    """A node's local transform: its ``matrix`` (column-major) or T * R * S."""
+    if "matrix" in node:
+        return np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T
+    x, y, z, w = node.get("rotation", [0.0, 0.0, 0.0, 1.0])
+    rotation = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    local = np.eye(4)
+    local[:3, :3] = rotation * np.asarray(node.get("scale", [1.0, 1.0, 1.0]), dtype=np.float64)
+    local[:3, 3] = node.get("translation", [0.0, 0.0, 0.0])
+    return local
+
+
+# --- 3MF -------------------------------------------------------------------------------------
+
+_3MF_MODEL = "3D/3dmodel.model"
+
+
+def _read_3mf(path: Path) -> Mesh:
+    """3MF: the triangles of every build item (objects and their components,
+    with their transforms), from the package's start part."""
+    import zipfile
+    import zlib
+    from xml.etree import ElementTree
+
+    try:
+        with zipfile.ZipFile(path) as package:
+            names = set(package.namelist())
+            part = _3mf_start_part(package, names)
+            xml = package.read(part)
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError) as exc:
+        raise _Unreadable(f"not a readable ZIP package ({exc})") from None
+    except zlib.error as exc:
+        raise _Unreadable(f"a part does not decompress ({exc})") from None
+    try:
+        root = ElementTree.fromstring(xml)
+    except ElementTree.ParseError as exc:
+        raise _Unreadable(f"its model part is not well-formed XML ({exc})") from None
+    if _tag(root) != "model":
+        raise _Unreadable("its model part has no <model> element")
+    objects: dict[str, object] = {}
+    for resources in (e for e in root if _tag(e) == "resources"):
+        for obj in (e for e in resources if _tag(e) == "object"):
+            objects[obj.get("id")] = obj
+    build = next((e for e in root if _tag(e) == "build"), None)
+    items = (
+        [(e.get("objectid"), _3mf_transform(e)) for e in build if _tag(e) == "item"]
+        if build is not None
+        else [(key, np.eye(4)) for key in objects]
+    )
+    vertices_list, cells_list = [], []
+    n = 0
+    transformed = False
+    stack = [(key, matrix, 0) for key, matrix in reversed(items)]
+    while stack:
+        key, matrix, depth = stack.pop()
+        if key not in objects:
+            raise _Unreadable(f"a build item or component refers to object {key}, not defined")
+        if depth > len(objects):
+            raise _Unreadable("its components refer to each other in a cycle")
+        obj = objects[key]
+        mesh = next((e for e in obj if _tag(e) == "mesh"), None)
+        if mesh is not None:
+            vertices, cells = _3mf_mesh(path, mesh)
+            if not np.array_equal(matrix, np.eye(4)):
+                vertices = vertices @ matrix[:3, :3].T + matrix[:3, 3]
+                transformed = True
+            vertices_list.append(vertices)
+            cells_list.append(cells + n)
+            n += len(vertices)
+        components = next((e for e in obj if _tag(e) == "components"), None)
+        if components is not None:
+            children = [e for e in components if _tag(e) == "component"]
+            stack.extend(
+                (c.get("objectid"), matrix @ _3mf_transform(c), depth + 1)
+                for c in reversed(children)
+            )
+    if not cells_list or not sum(len(c) for c in cells_list):
+        raise FormatError(f"{path}: holds no triangles or segments")
+    vertices = np.concatenate(vertices_list)
+    info: dict = {"source": str(path)}
+    if not transformed and _float32_text(vertices):
+        info["stored_precision"] = "float32"
+        vertices = _as_stored(vertices, "float32")
+    else:
+        info["stored_precision"] = "float64"
+    for meta in (e for e in root if _tag(e) == "metadata"):
+        grid = parse_grid_comment((meta.text or "").strip())
+        if meta.get("name", "").endswith("grid") and grid is not None:
+            info["grid"] = grid
+            break
+    return Mesh(vertices, np.concatenate(cells_list), info=info)
+
+
+def _float32_text(values: np.ndarray) -> bool:
+    """Whether decimal coordinates are float32 values: each one either is a
+    float32 value or is the 9-significant-digit text of one (as isoconvert's
+    3MF writer prints them: the nearest float32 gives the value back exactly,
+    the nearest double does not)."""
+    flat = values.reshape(-1)
+    # a few thousand coordinates settle most float64 meshes without a pass over all
+    for part in (flat[:4096], flat):
+        with np.errstate(over="ignore", invalid="ignore"):
+            as32 = part.astype(np.float32).astype(np.float64)
+        differ = as32 != part
+        if differ.any():
+            printed = np.char.mod("%.9g", as32[differ]).astype(np.float64)
+            if not (printed == part[differ]).all():
+                return False
+    return True
+
+
+def _3mf_start_part(package, names: set[str]) -> str:
+    """The model part the package's relationships name (else ``3D/3dmodel.model``)."""
+    from xml.etree import ElementTree
+
+    if "_rels/.rels" in names:
+        try:
+            rels = ElementTree.fromstring(package.read("_rels/.rels"))
+        except ElementTree.ParseError:
+            rels = None
+        for rel in rels if rels is not None else []:
+            if rel.get("Type", "").endswith("/3dmodel"):
+                target = rel.get("Target", "").lstrip("/")
+                if target in names:
+                    return target
+    if _3MF_MODEL in names:
+        return _3MF_MODEL
+    raise _Unreadable("the package has no 3D model part (3D/3dmodel.model)")
+
+
+def _3mf_transform(element) -> np.ndarray:
+    """A ``transform="m00 m01 m02 m10 ... m32"`` attribute as a 4x4 matrix acting
+    on column vectors (3MF multiplies row vectors on the left)."""
+    text = element.get("transform")
+    matrix = np.eye(4)
+    if text:
+        values = np.array(text.split(), dtype=np.float64)
+        if values.size != 12:
+            raise _Unreadable(f"a transform has {values.size} numbers, not 12")
+        matrix[:3, :] = values.reshape(4, 3).T
+    return matrix
+
+
+def _3mf_mesh(path: Path, mesh) -> tuple[np.ndarray, np.ndarray]:
+    """(V, 3) float64 vertices and (T, 3) int64 triangles of one ``<mesh>``."""
+    vertices_element = next((e for e in mesh if _tag(e) == "vertices"), None)
+    triangles_element = next((e for e in mesh if _tag(e) == "triangles"), None)
+    rows = [] if vertices_element is None else list(vertices_element)
+    try:
+        vertices = np.array(
+            [(v.get("x"), v.get("y"), v.get("z")) for v in rows], dtype=np.float64
+        ).reshape(-1, 3)
+    except (TypeError, ValueError):
+        raise _Unreadable("a vertex lacks x, y or z, or they are not numbers") from None
+    rows = [] if triangles_element is None else list(triangles_element)
+    try:
+        cells = np.array(
+            [(t.get("v1"), t.get("v2"), t.get("v3")) for t in rows], dtype=np.int64
+        ).reshape(-1, 3)
+    except (TypeError, ValueError):
+        raise _Unreadable("a triangle lacks v1, v2 or v3, or they are not integers") from None
+    _check_indices(path, cells, len(vertices), "triangle")
+    return vertices, cells

@@ -158,6 +158,17 @@ for _writer in (
         _SEGMENTS,
         precision="as given",
     ),
+    Writer(
+        "geojson",
+        "GeoJSON FeatureCollection of 2D contours (squares), LineStrings in planar world "
+        "coordinates (not lon/lat)",
+        (".geojson",),
+        LazyFunction("isoconvert.writers.geojson:write_geojson"),
+        False,
+        _SEGMENTS,
+        precision="float64",
+        records_grid=True,
+    ),
 ):
     WRITERS.register(_writer.name, _writer)
 
