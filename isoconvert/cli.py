@@ -191,6 +191,70 @@ SpaceOpt = Annotated[
         rich_help_panel="Input",
     ),
 ]
+_POST = "Post-processing"
+CloseOpt = Annotated[
+    bool,
+    _flag(
+        "--close",
+        help="Cap the surface where the object meets the grid's faces, so it comes out "
+        "watertight (cubes).",
+        rich_help_panel=_POST,
+    ),
+]
+LargestOpt = Annotated[
+    bool, _flag("--largest", help="Keep only the largest component.", rich_help_panel=_POST)
+]
+KeepOpt = Annotated[
+    int | None,
+    typer.Option(help="Keep the K largest components (by triangles).", rich_help_panel=_POST),
+]
+MinSizeOpt = Annotated[
+    int | None,
+    typer.Option(help="Drop components of fewer than N triangles.", rich_help_panel=_POST),
+]
+FillCavitiesOpt = Annotated[
+    bool,
+    _flag(
+        "--fill-cavities",
+        help="Drop closed surfaces inside other closed surfaces (internal bubbles).",
+        rich_help_panel=_POST,
+    ),
+]
+SmoothOpt = Annotated[
+    int,
+    typer.Option(
+        help="Smoothing iterations (0: none); keeps the volume, grid-face vertices stay on it.",
+        rich_help_panel=_POST,
+    ),
+]
+SmoothMethodOpt = Annotated[
+    str,
+    typer.Option(
+        help="sinc (windowed sinc, as VTK), taubin, or laplacian (shrinks the surface).",
+        rich_help_panel=_POST,
+    ),
+]
+PassbandOpt = Annotated[
+    float,
+    typer.Option(
+        help="Smoothing pass band in (0, 2); smaller smooths more.", rich_help_panel=_POST
+    ),
+]
+DecimateOpt = Annotated[
+    float | None,
+    typer.Option(
+        help="Remove this fraction of the triangles, e.g. 0.9 (needs isoconvert\\[simplify]).",
+        rich_help_panel=_POST,
+    ),
+]
+MaxErrorOpt = Annotated[
+    float | None,
+    typer.Option(
+        help="Decimate moving the surface at most this far (world units); alone, as far as "
+        "it allows.",
+        rich_help_panel=_POST,
+    ),
+]
 NormalsOpt = Annotated[
     bool,
     _flag(
@@ -346,7 +410,13 @@ def convert(
     input: Annotated[str, typer.Argument(help="Volume file, folder of TIFF slices, or glob.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Mesh file to write.")],
     level: Annotated[
-        str, typer.Option("--level", "-l", help="Isovalue, or 'auto' for Otsu's threshold.")
+        list[str],
+        typer.Option(
+            "--level",
+            "-l",
+            help="Isovalue, or 'auto' for Otsu's threshold; several --level write one mesh "
+            "each (NAME_levelL.ply).",
+        ),
     ],
     method: Annotated[
         str | None,
@@ -431,6 +501,16 @@ def convert(
             rich_help_panel="Output",
         ),
     ] = None,
+    close: CloseOpt = False,
+    largest: LargestOpt = False,
+    keep: KeepOpt = None,
+    min_size: MinSizeOpt = None,
+    fill_cavities: FillCavitiesOpt = False,
+    smooth: SmoothOpt = 0,
+    smooth_method: SmoothMethodOpt = "sinc",
+    passband: PassbandOpt = 0.1,
+    decimate: DecimateOpt = None,
+    max_error: MaxErrorOpt = None,
     block_size: Annotated[
         int | None,
         typer.Option(
@@ -456,11 +536,26 @@ def convert(
     required = parse_requirements(require)
     if report not in (None, "-"):
         check_output(report, force)  # before the work: a bad report name must not cost a mesh
-    from .convert import convert as run_convert
+    from .convert import convert_levels, level_outputs
 
+    post = _post_options(
+        close,
+        largest,
+        keep,
+        min_size,
+        fill_cavities,
+        smooth,
+        smooth_method,
+        passband,
+        decimate,
+        max_error,
+    )
+    reports = level_outputs(report, level) if report not in (None, "-") else None
+    for path in reports or ():
+        check_output(path, force)  # before the work: a bad report name must not cost a mesh
     start = time.perf_counter()
     with _stage_display(quiet, verbose) as (on_progress, on_status):
-        result = run_convert(
+        results = convert_levels(
             input,
             output,
             level,
@@ -476,6 +571,7 @@ def convert(
             space=space,
             normals=normals,
             values=values,
+            post=post,
             blocks=_blocks(block_size, max_memory, scheduler),
             on_status=on_status,
             on_progress=on_progress,
@@ -497,28 +593,80 @@ def convert(
             ),
         )
     if not quiet:
-        for note in result.volume.notes:
+        for note in results[0].volume.notes:
             print(f"note: {note}", file=sys.stderr)
-        mesh = result.mesh
-        kind = "triangles" if mesh.is_triangles else "segments"
-        kind = f"{kind}, {mesh.info['method']}"
-        slabs = mesh.info.get("blocks", 1)
-        if slabs > 1:
-            kind += f" in {slabs} slabs"
-        print(
-            f"wrote {result.output}: {mesh.n_vertices:,} vertices, {mesh.n_cells:,} {kind} "
-            f"(level {mesh.info['level']:g}, {time.perf_counter() - start:.2f} s)"
-        )
-    if report is not None or required:
-        from .report import check_mesh
+    failed = []
+    for n, result in enumerate(results):
+        if not quiet:
+            mesh = result.mesh
+            kind = "triangles" if mesh.is_triangles else "segments"
+            kind = f"{kind}, {mesh.info['method']}"
+            slabs = mesh.info.get("blocks", 1)
+            if slabs > 1:
+                kind += f" in {slabs} slabs"
+            steps = f", {', '.join(post.steps)}" if post.steps else ""
+            print(
+                f"wrote {result.output}: {mesh.n_vertices:,} vertices, {mesh.n_cells:,} {kind} "
+                f"(level {mesh.info['level']:g}{steps}, {time.perf_counter() - start:.2f} s)"
+            )
+        if report is not None or required:
+            target = reports[n] if reports else report
+            failed += _report_result(result, target, required, examples, force, quiet)
+    if failed:
+        raise typer.Exit(EXIT_CHECK_FAILED)
 
-        checked = check_mesh(
-            result.written,
-            examples=examples,
-            source=str(result.output),
-            grid=result.mesh.info.get("grid"),
-        )
-        _emit_report(checked, report, required, as_json=False, force=force, quiet=quiet)
+
+def _post_options(
+    close,
+    largest,
+    keep,
+    min_size,
+    fill_cavities,
+    smooth,
+    smooth_method,
+    passband,
+    decimate,
+    max_error,
+):
+    """The PostOptions of convert's and batch's post-processing options."""
+    from .post.pipeline import PostOptions
+
+    if largest and keep is not None:
+        raise IsoconvertError("--largest is --keep 1; give one of them")
+    return PostOptions(
+        close=close,
+        keep=1 if largest else keep,
+        min_size=min_size,
+        fill_cavities=fill_cavities,
+        smooth=smooth,
+        smooth_method=smooth_method,
+        passband=passband,
+        decimate=decimate,
+        max_error=max_error,
+    )
+
+
+def _report_result(result, target, required, examples, force, quiet) -> list[str]:
+    """Check what ``result`` wrote, against its volume's grid; with
+    post-processing, also the mesh as extracted, and say what changed.
+    Returns the required checks that failed."""
+    from .report import check_mesh
+
+    grid = result.mesh.info.get("grid")
+    checked = check_mesh(result.written, examples=examples, source=str(result.output), grid=grid)
+    if result.extracted is not None and not quiet:
+        from .post.pipeline import changes
+
+        before = check_mesh(result.extracted, examples=0, grid=grid).to_dict()
+        lines = changes(before, checked.to_dict()) or ["nothing the report measures"]
+        print(f"{result.output}: post-processing changed:", file=sys.stderr)
+        for line in lines:
+            print(f"  {line}", file=sys.stderr)
+    try:
+        _emit_report(checked, target, required, as_json=False, force=force, quiet=quiet)
+    except typer.Exit:
+        return checked.failures(required)
+    return []
 
 
 @app.command(cls=_Command)
@@ -657,6 +805,16 @@ def batch(
     ] = False,
     space: SpaceOpt = None,
     normals: NormalsOpt = False,
+    close: CloseOpt = False,
+    largest: LargestOpt = False,
+    keep: KeepOpt = None,
+    min_size: MinSizeOpt = None,
+    fill_cavities: FillCavitiesOpt = False,
+    smooth: SmoothOpt = 0,
+    smooth_method: SmoothMethodOpt = "sinc",
+    passband: PassbandOpt = 0.1,
+    decimate: DecimateOpt = None,
+    max_error: MaxErrorOpt = None,
     scheduler: SchedulerOpt = None,
 ) -> None:
     """Convert many volumes: files, folders (--recursive) and globs, in parallel."""
@@ -668,6 +826,18 @@ def batch(
     required = parse_requirements(require)
     writer = WRITERS.get(format)
     check_attributes(writer, normals, False, "--format")
+    post = _post_options(
+        close,
+        largest,
+        keep,
+        min_size,
+        fill_cavities,
+        smooth,
+        smooth_method,
+        passband,
+        decimate,
+        max_error,
+    )
     batching.check_jobs(jobs)
     if level is None and levels is None:
         raise VolumeError("batch needs --level (a number or auto) or --levels FILE")
@@ -722,6 +892,7 @@ def batch(
             vertex_offset=_vertex_offset(no_degenerate, exact_placement),
             space=space,
             normals=normals,
+            post=post,
             # the files running at once share the budget
             blocks=Blocks(max_memory=max(1, budget // workers) if budget else None),
         ),

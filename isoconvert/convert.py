@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 from pathlib import Path
@@ -12,15 +12,18 @@ import numpy as np
 from .atomic import check_output
 from .attributes import check_3d, vertex_normals, vertex_values
 from .errors import IsoconvertError, OutputError
-from .extract import extract
+from .extract import default_method, extract
 from .extract.blocks import Blocks
+from .extract.tables import DEFAULT_AMBIGUITY
 from .mesh import Mesh
+from .post.pipeline import PostOptions, post_process
 from .readers import ReadOptions, read_volume
 from .volume import Volume
-from .writers import WRITERS, check_attributes, output_format
+from .writers import WRITERS, Writer, check_attributes, output_format
 from .writers.stored import stored_mesh, write_mesh
 
 _READ_FIELDS = frozenset(f.name for f in fields(ReadOptions))
+_POST_FIELDS = frozenset(f.name for f in fields(PostOptions))
 
 
 @dataclass(frozen=True)
@@ -75,6 +78,8 @@ class ConvertOptions:
         A volume sampled at each vertex (trilinear, in world coordinates) and
         written as its value (:func:`~isoconvert.attributes.vertex_values`);
         read with the same options as the input.
+    post : PostOptions
+        Closing, clean-up, smoothing and decimation after extraction.
     """
 
     read: ReadOptions = field(default_factory=ReadOptions)
@@ -95,9 +100,11 @@ class ConvertOptions:
     source_name: str | None = None
     normals: bool = False
     values: str | Path | None = None
+    post: PostOptions = field(default_factory=PostOptions)
 
     def updated(self, **changes) -> ConvertOptions:
-        """A copy with ``changes``; names of :class:`ReadOptions` fields go to ``read``.
+        """A copy with ``changes``; names of :class:`ReadOptions` fields go to
+        ``read``, those of :class:`PostOptions` to ``post``.
 
         Raises
         ------
@@ -105,11 +112,14 @@ class ConvertOptions:
             A name that is no option.
         """
         read = {k: changes.pop(k) for k in list(changes) if k in _READ_FIELDS}
+        post = {k: changes.pop(k) for k in list(changes) if k in _POST_FIELDS}
         unknown = set(changes) - {f.name for f in fields(self)}
         if unknown:
             raise IsoconvertError(f"unknown conversion option(s): {', '.join(sorted(unknown))}")
         if read:
             changes["read"] = replace(self.read, **read)
+        if post:
+            changes["post"] = replace(self.post, **post)
         return replace(self, **changes)
 
 
@@ -121,12 +131,14 @@ class ConvertResult:
     ----------
     volume : Volume
     mesh : Mesh
-        The extracted mesh, in float64.
+        The mesh written (extracted and post-processed), in float64.
     output : Path
     format : str
         The writer used.
     ascii : bool
         Whether the file is text.
+    extracted : Mesh or None
+        The mesh as extracted, before post-processing (None when no step ran).
     """
 
     volume: Volume
@@ -134,6 +146,7 @@ class ConvertResult:
     output: Path
     format: str
     ascii: bool = False
+    extracted: Mesh | None = None
 
     @cached_property
     def written(self) -> Mesh:
@@ -164,24 +177,74 @@ def convert(
     input, output : str or Path
     level : float or "auto"
     options : ConvertOptions or None
-        How to read, extract and write; None for the defaults.
+        How to read, extract, post-process and write; None for the defaults.
     on_status : callable or None
         Receives one-line notices (compiling, levels equal to samples, precision).
     on_progress : callable or None
         Called with the stage starting: "reading", "extracting", "writing".
     **changes
-        Fields of :class:`ConvertOptions` or :class:`ReadOptions` to change,
-        e.g. ``convert("a.raw", "a.ply", 80.5, shape=(256, 256, 128), dtype="uint8")``.
+        Fields of :class:`ConvertOptions`, :class:`ReadOptions` or
+        :class:`~isoconvert.post.pipeline.PostOptions` to change, e.g.
+        ``convert("a.raw", "a.ply", 80.5, shape=(256, 256, 128), dtype="uint8")``.
+    """
+    (result,) = convert_levels(
+        input,
+        output,
+        [level],
+        options,
+        on_status=on_status,
+        on_progress=on_progress,
+        **changes,
+    )
+    return result
+
+
+def level_outputs(output: str | Path, levels: Sequence[float | str]) -> list[Path]:
+    """Where each level's mesh goes: ``output`` itself for one level, else
+    ``NAME_levelL.SUFFIX`` beside it (``engine_level80.5.ply``).
+
+    Raises
+    ------
+    OutputError
+        The same level twice.
+    """
+    output = Path(output)
+    if len(levels) == 1:
+        return [output]
+    texts = [f"{level:g}" if not isinstance(level, str) else level.strip() for level in levels]
+    if len(set(texts)) < len(texts):
+        raise OutputError(f"--level {' '.join(texts)}: a level is given twice")
+    return [output.with_name(f"{output.stem}_level{t}{output.suffix}") for t in texts]
+
+
+def convert_levels(
+    input: str | Path,
+    output: str | Path,
+    levels: Sequence[float | str],
+    options: ConvertOptions | None = None,
+    *,
+    on_status: Callable[[str], None] | None = None,
+    on_progress: Callable[[str], None] | None = None,
+    **changes,
+) -> list[ConvertResult]:
+    """:func:`convert` at several levels, reading the volume once: one mesh per
+    level, named by :func:`level_outputs`.
+
+    A volume read from its file that fits the memory budget (``--max-memory``)
+    is read into memory once for all levels; a larger one is read slab by slab
+    for each level.
     """
     opts = (options or ConvertOptions()).updated(**changes)
     progress = on_progress or (lambda stage: None)
-    check_output(output, opts.force)  # first: a folder given as -o is "a folder", not a format
+    outputs = level_outputs(output, levels)
+    for path in outputs:  # first: a folder given as -o is "a folder", not a format
+        check_output(path, opts.force)
     writer = output_format(output, opts.format)
     check_attributes(writer, opts.normals, opts.values is not None, output)
     by_suffix = WRITERS.by_suffix(Path(output).suffix)
     if on_status and by_suffix and by_suffix[0] != writer.name:
         on_status(f"note: writing {writer.name} into {output}, whose extension says {by_suffix[0]}")
-    if Path(output).resolve() == Path(input).resolve():
+    if any(path.resolve() == Path(input).resolve() for path in outputs):
         raise OutputError(f"{output}: is the input file; choose another output name")
     progress("reading")
     volume = read_volume(
@@ -195,9 +258,43 @@ def convert(
         volume = volume.in_frame(opts.space)
     if opts.source_name is not None:
         volume.source = opts.source_name
+    opts.post.check_method(opts.method or default_method(volume))
     if opts.normals:
         check_3d(volume, "normals")
     value_volume = None if opts.values is None else _value_volume(opts, volume)
+    if len(levels) > 1 and volume.grid is not None and volume.grid.nbytes <= opts.blocks.budget:
+        volume = _in_memory(volume)
+    return [
+        _extract_and_write(volume, value_volume, level, path, writer, opts, on_status, progress)
+        for level, path in zip(levels, outputs, strict=True)
+    ]
+
+
+def _in_memory(volume: Volume) -> Volume:
+    """The same volume with its samples read into memory once."""
+    return Volume(
+        volume.data,
+        spacing=volume.spacing,
+        origin=volume.origin,
+        direction=volume.direction,
+        source=volume.source,
+        notes=volume.notes,
+        unit=volume.unit,
+        frame=volume.frame,
+    )
+
+
+def _extract_and_write(
+    volume: Volume,
+    value_volume: Volume | None,
+    level: float | str,
+    output: Path,
+    writer: Writer,
+    opts: ConvertOptions,
+    on_status: Callable[[str], None] | None,
+    progress: Callable[[str], None],
+) -> ConvertResult:
+    """Extract one level, post-process, sample attributes, write."""
     method_options = {} if opts.axis is None else {"axis": opts.axis}
     if opts.vertex_offset is not None:
         method_options["vertex_offset"] = opts.vertex_offset
@@ -217,6 +314,19 @@ def convert(
         blocks=blocks,
         **method_options,
     )
+    extracted = None
+    if opts.post.steps:
+        progress("post-processing")
+        extracted = mesh
+        mesh = post_process(
+            mesh,
+            volume,
+            opts.post,
+            ambiguity=opts.ambiguity or DEFAULT_AMBIGUITY,
+            flip=opts.flip,
+            nan_as=opts.nan_as,
+            on_status=on_status,
+        )
     if opts.normals and len(mesh.cells):
         mesh.normals = vertex_normals(mesh, volume, flip=opts.flip, nan_as=opts.nan_as)
         mesh.info["normals"] = "volume gradient"
@@ -233,7 +343,7 @@ def convert(
     path = write_mesh(
         mesh, output, format=writer.name, ascii=opts.ascii, force=opts.force, on_status=on_status
     )
-    return ConvertResult(volume, mesh, path, writer.name, opts.ascii)
+    return ConvertResult(volume, mesh, path, writer.name, opts.ascii, extracted)
 
 
 def _value_volume(opts: ConvertOptions, volume: Volume) -> Volume:

@@ -1,0 +1,223 @@
+"""Closing a surface where its object is cut by the grid's boundary (``--close``).
+
+A Marching Cubes surface is open where the object touches a face of the grid:
+an organ cut by the scan's field of view. Padding the volume with values below
+the level would close it, with a copy of the volume and with the cap one cell
+outside the grid. Instead, the cap is built on the grid's faces themselves:
+on each face, the region where samples are positive (>= level) is bounded by
+the very segments along which the surface meets that face (Marching Squares on
+the face image, with the cubes' rule for ambiguous faces). Each face cell's
+positive part is a convex polygon (a triangle, quadrilateral, pentagon or the
+hexagon of an ambiguous face whose positive corners connect), whose corners are
+positive samples of the face and vertices of the surface on the cell's edges.
+Triangulating those polygons gives a cap that meets the surface at its own
+vertices (found by grid edge id, no welding), lies exactly in the faces, and
+shares its vertices at positive samples between faces that meet at a grid edge:
+the closed surface bounds exactly the part of the object inside the grid.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import IsoconvertError
+from ..extract.placement import reversed_orientation
+from ..extract.tables import DEFAULT_AMBIGUITY
+from ..mesh import Mesh
+from ..volume import Volume, slabs
+
+# Corners of a face cell in cyclic order in its (p, q) plane, and the four cell
+# edges: edge c runs from corner c to corner c + 1 (mod 4). Edge 0 and 2 lie
+# along p, 1 and 3 along q; (dp, dq) is the lower end of each.
+_CORNERS = ((0, 0), (1, 0), (1, 1), (0, 1))
+_EDGE_LOW = ((0, 0), (1, 0), (0, 1), (0, 0))
+_EDGE_AXIS = (0, 1, 0, 1)  # 0: along p, 1: along q
+
+
+def _cell_triangles(case: int, rule: str) -> list[tuple[int, int, int]]:
+    """Triangles of the positive part of a face cell, as slots: 0-3 are the
+    corners, 4-7 the vertices on edges 0-3; counter-clockwise in (p, q).
+
+    Parameters
+    ----------
+    case : int
+        Bit c set when corner c is positive.
+    rule : str
+        The cubes' ambiguity rule: "separate-positive" cuts the two positive
+        corners of an ambiguous cell apart, "separate-negative" joins them.
+    """
+    positive = [bool(case >> c & 1) for c in range(4)]
+    bipolar = [positive[c] != positive[(c + 1) % 4] for c in range(4)]
+    if sum(bipolar) == 4 and rule == "separate-positive":
+        # a triangle at each positive corner c: edge c - 1, corner c, edge c
+        polygons = [[4 + (c - 1) % 4, c, 4 + c] for c in range(4) if positive[c]]
+    else:
+        # walk the cell's border, keeping the positive corners and the crossings
+        polygon = []
+        for c in range(4):
+            if positive[c]:
+                polygon.append(c)
+            if bipolar[c]:
+                polygon.append(4 + c)
+        polygons = [polygon] if any(positive) else []
+    # every polygon is convex (the square minus corner triangles): a fan will do
+    return [(p[0], p[i], p[i + 1]) for p in polygons for i in range(1, len(p) - 1)]
+
+
+def _face_images(volume: Volume):
+    """Yield ``(axis, side, image)`` for the six faces of a 3D grid: ``image``
+    is ``(n_p, n_q)``, p and q the other two axes in increasing order."""
+    shape = volume.shape
+    if volume.grid is None:
+        data = volume.data
+        for axis in range(3):
+            for side in (0, shape[axis] - 1):
+                yield axis, side, np.take(data, side, axis=axis)
+        return
+    # a volume read from its file: one pass over it for the x and y faces
+    faces = {
+        (0, 0): np.empty((shape[1], shape[2]), volume.dtype),
+        (0, 1): np.empty((shape[1], shape[2]), volume.dtype),
+        (1, 0): np.empty((shape[0], shape[2]), volume.dtype),
+        (1, 1): np.empty((shape[0], shape[2]), volume.dtype),
+    }
+    z_faces = {}
+    k = 0
+    for slab in slabs(volume.samples):
+        n = slab.shape[2]
+        faces[0, 0][:, k : k + n] = slab[0]
+        faces[0, 1][:, k : k + n] = slab[-1]
+        faces[1, 0][:, k : k + n] = slab[:, 0]
+        faces[1, 1][:, k : k + n] = slab[:, -1]
+        if k == 0:
+            z_faces[0] = np.array(slab[:, :, 0])
+        if k + n == shape[2]:
+            z_faces[1] = np.array(slab[:, :, -1])
+        k += n
+    for axis in (0, 1):
+        yield axis, 0, faces[axis, 0]
+        yield axis, shape[axis] - 1, faces[axis, 1]
+    yield 2, 0, z_faces[0]
+    yield 2, shape[2] - 1, z_faces[1]
+
+
+def close_at_grid(
+    mesh: Mesh,
+    volume: Volume,
+    level: float,
+    *,
+    ambiguity: str = DEFAULT_AMBIGUITY,
+    flip: bool = False,
+    nan_as: float | None = None,
+) -> Mesh:
+    """Cap a Marching Cubes surface on the faces of its grid.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The surface of ``volume`` at ``level`` by cubes, with its ``edge_ids``
+        (as :func:`isoconvert.extract` returns it, also block-wise).
+    volume : Volume
+        The 3D volume it was extracted from.
+    level : float
+    ambiguity : str
+        The rule the surface was extracted with.
+    flip : bool
+        The surface was extracted with ``flip`` (the cap is reversed as well).
+    nan_as : float or None
+        The value NaN/Inf samples stood for.
+
+    Returns
+    -------
+    Mesh
+        ``vertices (V + S, 3)``: the surface's, then one at each positive
+        sample on the grid's boundary that the cap uses; ``cells (C + T, 3)``:
+        the surface's, then the cap's; ``edge_ids (V + S,)``: the surface's,
+        then ``-1 - n`` for the sample of linear index ``n`` (x fastest), so
+        no id of the two kinds collides; ``info["closed"]`` counts the cap's
+        triangles.
+
+    Raises
+    ------
+    IsoconvertError
+        The mesh has no edge ids or is not the cubes surface of this volume.
+    """
+    if mesh.edge_ids is None or not mesh.is_triangles:
+        raise IsoconvertError(
+            "--close needs the surface as extracted (with its grid edge ids), by --method cubes"
+        )
+    shape = np.asarray(volume.shape, dtype=np.int64)
+    stride = np.array([1, shape[0], shape[0] * shape[1]], dtype=np.int64)
+    outward_flip = reversed_orientation(volume, flip)
+    tables = [np.array(_cell_triangles(case, ambiguity), dtype=np.int64) for case in range(16)]
+    keys = []  # (T, 3) int64: edge ids (>= 0) or -1 - sample index (< 0)
+    for axis, side, image in _face_images(volume):
+        p_axis, q_axis = [a for a in range(3) if a != axis]
+        values = np.asarray(image, dtype=np.float64)
+        if nan_as is not None:
+            values = np.where(np.isfinite(values), values, nan_as)
+        positive = values >= level
+        if not positive.any():
+            continue
+        bits = positive.astype(np.int64)
+        case = bits[:-1, :-1] | bits[1:, :-1] << 1 | bits[1:, 1:] << 2 | bits[:-1, 1:] << 3
+        # the cap's normals point out of the grid: -axis on side 0, +axis on the far side
+        p_cross_q = 1 if (p_axis, q_axis) in ((1, 2), (0, 1)) else -1
+        reverse = (p_cross_q * (1 if side else -1) < 0) != outward_flip
+        for c in range(1, 16):
+            table = tables[c]
+            if not len(table):
+                continue
+            p, q = np.nonzero(case == c)
+            if not len(p):
+                continue
+            base = side * stride[axis] + p * stride[p_axis] + q * stride[q_axis]
+            slot_keys = np.empty((len(p), 8), dtype=np.int64)
+            for corner, (dp, dq) in enumerate(_CORNERS):
+                slot_keys[:, corner] = -1 - (base + dp * stride[p_axis] + dq * stride[q_axis])
+            for edge, ((dp, dq), along) in enumerate(zip(_EDGE_LOW, _EDGE_AXIS, strict=True)):
+                low = base + dp * stride[p_axis] + dq * stride[q_axis]
+                slot_keys[:, 4 + edge] = 3 * low + (q_axis if along else p_axis)
+            triangles = slot_keys[:, table].reshape(-1, 3)
+            keys.append(triangles[:, ::-1] if reverse else triangles)
+    if not keys:
+        return mesh
+    keys = np.concatenate(keys)
+    cap, vertices, ids = _resolve(mesh, keys, shape, volume)
+    info = dict(mesh.info)
+    info["closed"] = {"cap_triangles": len(cap), "cap_vertices": len(vertices)}
+    return Mesh(
+        np.concatenate([np.asarray(mesh.vertices), vertices]),
+        np.concatenate([np.asarray(mesh.cells), cap]),
+        np.concatenate([np.asarray(mesh.edge_ids), ids]),
+        info,
+    )
+
+
+def _resolve(
+    mesh: Mesh, keys: np.ndarray, shape: np.ndarray, volume: Volume
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cap's triangles as vertex indices, its new vertices and their ids."""
+    flat = keys.ravel()
+    on_edges = flat >= 0
+    order = np.argsort(mesh.edge_ids, kind="stable")
+    sorted_ids = np.asarray(mesh.edge_ids)[order]
+    where = np.searchsorted(sorted_ids, flat[on_edges])
+    where = np.minimum(where, len(sorted_ids) - 1)
+    if not len(sorted_ids) or not np.array_equal(sorted_ids[where], flat[on_edges]):
+        raise IsoconvertError(
+            "--close: the surface does not cross the grid's faces where the volume says it "
+            "should; it must be the cubes surface of this volume at this level"
+        )
+    index = np.empty(len(flat), dtype=np.int64)
+    index[on_edges] = order[where]
+    samples, rank = np.unique(-1 - flat[~on_edges], return_inverse=True)
+    index[~on_edges] = len(mesh.vertices) + rank
+    i = samples % shape[0]
+    j = samples // shape[0] % shape[1]
+    k = samples // (shape[0] * shape[1])
+    vertices = volume.index_to_world(np.column_stack([i, j, k]).astype(np.float64))
+    return index.reshape(-1, 3), vertices, -1 - samples
+
+
+__all__ = ["close_at_grid"]

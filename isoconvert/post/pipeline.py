@@ -1,0 +1,210 @@
+"""The post-processing steps of a conversion, in order, and what they changed.
+
+Order: close at the grid's faces (it needs the surface as extracted, with its
+edge ids), clean up components (cheaper steps after it work on less), smooth,
+then decimate (a smoothed surface decimates with a smaller error).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ..errors import IsoconvertError
+from ..mesh import Mesh
+from ..volume import Volume
+from .smooth import METHODS, SmoothOptions
+
+
+@dataclass(frozen=True)
+class PostOptions:
+    """What happens to a surface after extraction (all off by default).
+
+    Attributes
+    ----------
+    close : bool
+        Cap the surface on the grid's faces (cubes only), as if the volume were
+        padded with values below the level.
+    keep : int or None
+        Keep the ``keep`` largest components (by triangles); ``--largest`` is 1.
+    min_size : int or None
+        Drop components of fewer triangles.
+    fill_cavities : bool
+        Drop closed components inside another closed component.
+    smooth : int
+        Smoothing iterations (0: none).
+    smooth_method : str
+        "sinc" (windowed sinc), "taubin" or "laplacian" (shrinks).
+    passband : float
+        The smoothing filter's pass band, in (0, 2); smaller smooths more.
+    decimate : float or None
+        Fraction of triangles to remove, in [0, 1).
+    max_error : float or None
+        Largest distance (world units) decimation may move the surface; alone,
+        decimates as far as it allows.
+    """
+
+    close: bool = False
+    keep: int | None = None
+    min_size: int | None = None
+    fill_cavities: bool = False
+    smooth: int = 0
+    smooth_method: str = "sinc"
+    passband: float = 0.1
+    decimate: float | None = None
+    max_error: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.keep is not None and self.keep < 1:
+            raise IsoconvertError(f"--keep takes a number of components >= 1, got {self.keep}")
+        if self.min_size is not None and self.min_size < 1:
+            raise IsoconvertError(f"--min-size takes a triangle count >= 1, got {self.min_size}")
+        if self.smooth_method not in METHODS:
+            raise IsoconvertError(
+                f"unknown --smooth-method {self.smooth_method!r}; choose from: {', '.join(METHODS)}"
+            )
+        if self.smooth:
+            SmoothOptions(self.smooth, self.smooth_method, self.passband)  # checks them
+        if self.decimate is not None and not 0.0 <= self.decimate < 1.0:
+            raise IsoconvertError(
+                f"--decimate takes the fraction of triangles to remove, 0 <= F < 1, got "
+                f"{self.decimate}; e.g. --decimate 0.9 keeps about 10%"
+            )
+        if self.max_error is not None and not self.max_error > 0:
+            raise IsoconvertError(
+                f"--max-error takes a distance in world units > 0, got {self.max_error}"
+            )
+
+    @property
+    def steps(self) -> list[str]:
+        """The steps that will run, in order."""
+        steps = []
+        if self.close:
+            steps.append("close")
+        if self.fill_cavities:
+            steps.append("fill-cavities")
+        if self.min_size is not None:
+            steps.append(f"min-size {self.min_size}")
+        if self.keep is not None:
+            steps.append("largest" if self.keep == 1 else f"keep {self.keep}")
+        if self.smooth:
+            steps.append(f"smooth {self.smooth} {self.smooth_method}")
+        if self.decimate is not None or self.max_error is not None:
+            steps.append("decimate")
+        return steps
+
+    def check_method(self, method: str) -> None:
+        """Refuse steps that the extraction method cannot give them input for."""
+        if self.close and method != "cubes":
+            raise IsoconvertError(f"--close caps cubes surfaces; use --method cubes (got {method})")
+        if self.steps and method == "squares":
+            raise IsoconvertError(
+                f"{', '.join(self.steps)} work on surfaces; squares gives contours"
+            )
+
+
+def post_process(
+    mesh: Mesh,
+    volume: Volume,
+    options: PostOptions,
+    *,
+    ambiguity: str,
+    flip: bool,
+    nan_as: float | None,
+    on_status: Callable[[str], None] | None = None,
+) -> Mesh:
+    """Run the steps of ``options`` on a surface extracted from ``volume``.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        As :func:`isoconvert.extract` returned it (``info["level"]`` included).
+    volume : Volume
+    options : PostOptions
+    ambiguity, flip, nan_as
+        As the extraction used them (the cap follows the same rules).
+    on_status : callable or None
+        Receives a line per step that changed the mesh.
+
+    Returns
+    -------
+    Mesh
+    """
+    if options.close:
+        from .cap import close_at_grid
+
+        mesh = close_at_grid(
+            mesh,
+            volume,
+            float(mesh.info["level"]),
+            ambiguity=ambiguity,
+            flip=flip,
+            nan_as=nan_as,
+        )
+    if options.fill_cavities or options.min_size is not None or options.keep is not None:
+        from .components import drop_small, fill_cavities, keep_largest
+
+        if options.fill_cavities:
+            mesh = fill_cavities(mesh)
+        if options.min_size is not None:
+            mesh = drop_small(mesh, min_triangles=options.min_size)
+        if options.keep is not None:
+            mesh = keep_largest(mesh, options.keep)
+    if options.smooth:
+        from .smooth import smooth
+
+        mesh = smooth(mesh, options.smooth, options.smooth_method, passband=options.passband)
+    if options.decimate is not None or options.max_error is not None:
+        from .decimate import decimate
+
+        mesh = decimate(mesh, options.decimate, options.max_error)
+    return mesh
+
+
+#: What :func:`changes` compares: (label, where in the report's dict).
+_COMPARED = (
+    ("triangles", ("counts", "triangles")),
+    ("vertices", ("counts", "vertices")),
+    ("components", ("topology", "components")),
+    ("Euler characteristic", ("topology", "euler_characteristic")),
+    ("holes (boundary edges inside)", ("problems", "boundary_edges_inside", "count")),
+    ("boundary edges on the grid", ("problems", "boundary_edges_on_domain_boundary", "count")),
+    ("non-manifold edges", ("problems", "non_manifold_edges", "count")),
+    ("non-manifold vertices", ("problems", "non_manifold_vertices", "count")),
+    ("area", ("measures", "area")),
+    ("volume", ("measures", "volume")),
+)
+
+
+def changes(before: dict, after: dict) -> list[str]:
+    """Lines saying what post-processing changed, from two reports' dicts
+    (:meth:`~isoconvert.report.MeshReport.to_dict`): the compared measures, then
+    each check that passed before and fails after, or the other way."""
+
+    def get(report: dict, path: tuple[str, ...]):
+        for key in path:
+            if not isinstance(report, dict) or key not in report:
+                return None
+            report = report[key]
+        return report
+
+    lines = []
+    for label, path in _COMPARED:
+        a, b = get(before, path), get(after, path)
+        if a is None or b is None:
+            continue
+        if isinstance(a, float) or isinstance(b, float):
+            if a == b:
+                continue
+            relative = f" ({(b - a) / abs(a):+.2%})" if a else ""
+            lines.append(f"{label}: {a:.6g} -> {b:.6g}{relative}")
+        elif a != b:
+            lines.append(f"{label}: {a:,} -> {b:,}")
+    for name, passed in (before.get("checks") or {}).items():
+        now = (after.get("checks") or {}).get(name)
+        if now is not None and now != passed:
+            lines.append(f"{name}: {'PASS' if passed else 'FAIL'} -> {'PASS' if now else 'FAIL'}")
+    return lines
+
+
+__all__ = ["PostOptions", "changes", "post_process"]
