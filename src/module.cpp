@@ -21,6 +21,7 @@ using iso::i64;
 void bind_tetra_squares(nb::module_ &m);  // more.cpp
 void bind_report(nb::module_ &m);         // report.cpp
 void bind_sample(nb::module_ &m);         // sample.cpp
+void bind_smooth(nb::module_ &m);         // smooth.cpp
 
 namespace {
 
@@ -115,4 +116,5 @@ NB_MODULE(_native, m) {
   bind_tetra_squares(m);
   bind_report(m);
   bind_sample(m);
+  bind_smooth(m);
 }

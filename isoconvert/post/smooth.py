@@ -368,9 +368,15 @@ class _Stencil:
         free = ~fixed & ~self.curve
         take_ab = free[a] | (boundary & self.curve[a])
         take_ba = free[b] | (boundary & self.curve[b])
-        self.target = np.concatenate([a[take_ab], b[take_ba]])
-        self.neighbour = np.concatenate([b[take_ab], a[take_ba]])
-        count = np.bincount(self.target, minlength=n).astype(np.float64)
+        target = np.concatenate([a[take_ab], b[take_ba]])
+        neighbour = np.concatenate([b[take_ab], a[take_ba]])
+        # in compressed rows for the compiled kernel: vertex i's neighbours are
+        # neighbours[offsets[i] : offsets[i + 1]]
+        counts = np.bincount(target, minlength=n)
+        self.offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        self.neighbours = np.ascontiguousarray(neighbour[np.argsort(target, kind="stable")])
+        self.threads = kernel_threads()
+        count = counts.astype(np.float64)
         self.still = np.flatnonzero(count == 0)
         self.inverse_count = np.divide(1.0, count, out=np.zeros(n), where=count > 0)
         self.n = n
@@ -398,13 +404,10 @@ class _Stencil:
         -------
         (3, V) float64
         """
+        from .. import _native
+
         out = np.empty_like(x)
-        for k in range(3):
-            row = x[k]
-            # neighbour sums in one vectorized pass over the stencil entries
-            total = np.bincount(self.target, weights=np.take(row, self.neighbour), minlength=self.n)
-            np.multiply(total, self.inverse_count, out=total)
-            np.subtract(row, total, out=out[k])
+        _native.umbrella(self.offsets, self.neighbours, self.inverse_count, x, self.threads, out)
         if len(self.still):
             out[:, self.still] = 0.0
         if self.n_constrained:
