@@ -80,6 +80,16 @@ class ConvertOptions:
         read with the same options as the input.
     post : PostOptions
         Closing, clean-up, smoothing and decimation after extraction.
+    labels : tuple of int or None
+        A label volume: the labels whose surfaces to extract (empty: every
+        label); see :func:`convert_labels`. None: an isosurface.
+    single_file : bool
+        Labels: one mesh with every boundary once and each triangle's two
+        labels, instead of one file per label.
+    background : int
+        Labels: the value of no label.
+    label_smoothing : int or None
+        Labels: Surface Nets relaxation iterations (None: 16; 0: the voxel faces).
     """
 
     read: ReadOptions = field(default_factory=ReadOptions)
@@ -101,6 +111,10 @@ class ConvertOptions:
     normals: bool = False
     values: str | Path | None = None
     post: PostOptions = field(default_factory=PostOptions)
+    labels: tuple[int, ...] | None = None
+    single_file: bool = False
+    background: int = 0
+    label_smoothing: int | None = None
 
     def updated(self, **changes) -> ConvertOptions:
         """A copy with ``changes``; names of :class:`ReadOptions` fields go to
@@ -240,13 +254,28 @@ def convert_levels(
     for path in outputs:  # first: a folder given as -o is "a folder", not a format
         check_output(path, opts.force)
     writer = output_format(output, opts.format)
-    check_attributes(writer, opts.normals, opts.values is not None, output)
+    check_attributes(writer, output, normals=opts.normals, values=opts.values is not None)
     by_suffix = WRITERS.by_suffix(Path(output).suffix)
     if on_status and by_suffix and by_suffix[0] != writer.name:
         on_status(f"note: writing {writer.name} into {output}, whose extension says {by_suffix[0]}")
     if any(path.resolve() == Path(input).resolve() for path in outputs):
         raise OutputError(f"{output}: is the input file; choose another output name")
     progress("reading")
+    volume = _read_input(input, opts)
+    opts.post.check_method(opts.method or default_method(volume))
+    if opts.normals:
+        check_3d(volume, "normals")
+    value_volume = None if opts.values is None else _value_volume(opts, volume)
+    if len(levels) > 1 and volume.grid is not None and volume.grid.nbytes <= opts.blocks.budget:
+        volume = _in_memory(volume)
+    return [
+        _extract_and_write(volume, value_volume, level, path, writer, opts, on_status, progress)
+        for level, path in zip(levels, outputs, strict=True)
+    ]
+
+
+def _read_input(input: str | Path, opts: ConvertOptions) -> Volume:
+    """The input volume, in the frame ``opts.space`` asks for."""
     volume = read_volume(
         input,
         format=opts.input_format,
@@ -258,16 +287,102 @@ def convert_levels(
         volume = volume.in_frame(opts.space)
     if opts.source_name is not None:
         volume.source = opts.source_name
-    opts.post.check_method(opts.method or default_method(volume))
-    if opts.normals:
-        check_3d(volume, "normals")
-    value_volume = None if opts.values is None else _value_volume(opts, volume)
-    if len(levels) > 1 and volume.grid is not None and volume.grid.nbytes <= opts.blocks.budget:
-        volume = _in_memory(volume)
-    return [
-        _extract_and_write(volume, value_volume, level, path, writer, opts, on_status, progress)
-        for level, path in zip(levels, outputs, strict=True)
-    ]
+    return volume
+
+
+def label_outputs(output: str | Path, labels: Sequence[int]) -> list[Path]:
+    """Where each label's surface goes: ``NAME_labelL.SUFFIX`` beside ``output``."""
+    output = Path(output)
+    return [output.with_name(f"{output.stem}_label{label}{output.suffix}") for label in labels]
+
+
+def convert_labels(
+    input: str | Path,
+    output: str | Path,
+    labels: Sequence[int] = (),
+    options: ConvertOptions | None = None,
+    *,
+    on_status: Callable[[str], None] | None = None,
+    on_progress: Callable[[str], None] | None = None,
+    **changes,
+) -> list[ConvertResult]:
+    """The surfaces of the labels of a label volume (segmentation, atlas), by
+    Surface Nets (:func:`isoconvert.extract.labels.label_surfaces`), each closed
+    and sharing its boundary with its neighbours exactly.
+
+    Parameters
+    ----------
+    input, output : str or Path
+        Without ``single_file``, label L goes to :func:`label_outputs`
+        (``atlas_label3.ply``); with it, everything goes to ``output``, each
+        triangle with the labels on its two sides (PLY, VTP).
+    labels : sequence of int
+        The labels to extract; empty: every label but the background.
+    options : ConvertOptions or None
+        ``label_smoothing`` is the number of Surface Nets relaxation iterations
+        (default 16; 0 gives the voxel faces). The post-processing steps but
+        closing and smoothing (label surfaces are closed and smoothed already)
+        run on each label's surface, which then no longer shares its boundary
+        exactly; not with ``single_file``.
+    on_status, on_progress, **changes
+        As :func:`convert`.
+    """
+    from .extract.labels import label_surfaces
+
+    opts = (options or ConvertOptions()).updated(labels=tuple(labels), **changes)
+    progress = on_progress or (lambda stage: None)
+    writer = output_format(output, opts.format)
+    if opts.normals or opts.values is not None:
+        raise IsoconvertError(
+            "--normals and --values sample an isosurface's volume; label surfaces have "
+            "neither: leave them out with --labels"
+        )
+    post = replace(opts.post, close=False, smooth=0)  # label surfaces are closed and smoothed
+    if opts.single_file:
+        check_output(output, opts.force)
+        check_attributes(writer, output, labels=True)
+        if post.steps:
+            raise IsoconvertError(
+                f"{', '.join(post.steps)} would break the shared boundaries of "
+                "--single-file; write one file per label instead"
+            )
+    elif opts.labels:
+        for path in label_outputs(output, opts.labels):
+            check_output(path, opts.force)
+    progress("reading")
+    volume = _read_input(input, opts)
+    progress("extracting")
+    surfaces = label_surfaces(
+        volume,
+        opts.labels or None,
+        background=opts.background,
+        smoothing=opts.label_smoothing,
+        on_status=on_status,
+    )
+    if opts.single_file:
+        mesh = surfaces.combined
+        mesh.cell_labels = surfaces.boundary_labels
+        progress("writing")
+        path = write_mesh(mesh, output, format=writer.name, ascii=opts.ascii, force=opts.force)
+        return [ConvertResult(volume, mesh, path, writer.name, opts.ascii)]
+    outputs = label_outputs(output, surfaces.labels)
+    for path in outputs:  # every name is checked before the first file is written
+        check_output(path, opts.force)
+    results = []
+    for label, path in zip(surfaces.labels, outputs, strict=True):
+        mesh = extracted = surfaces[label]
+        if post.steps:
+            progress("post-processing")
+            mesh = post_process(mesh, volume, post, ambiguity=DEFAULT_AMBIGUITY, flip=False,
+                                nan_as=None, on_status=on_status)  # fmt: skip
+        progress("writing")
+        written = write_mesh(mesh, path, format=writer.name, ascii=opts.ascii, force=opts.force)
+        results.append(
+            ConvertResult(
+                volume, mesh, written, writer.name, opts.ascii, extracted if post.steps else None
+            )  # fmt: skip
+        )
+    return results
 
 
 def _in_memory(volume: Volume) -> Volume:

@@ -30,6 +30,9 @@ class Mesh:
     values : (V,) float32 or None
         A scalar at each vertex (e.g. another volume sampled there, see
         :func:`isoconvert.vertex_values`); NaN where it has none.
+    cell_labels : (C, 2) int64 or None
+        The labels on the two sides of each cell (label volumes): normals point
+        from the label in column 0 to the one in column 1.
     """
 
     vertices: np.ndarray
@@ -38,6 +41,7 @@ class Mesh:
     info: dict = field(default_factory=dict)
     normals: np.ndarray | None = None
     values: np.ndarray | None = None
+    cell_labels: np.ndarray | None = None
 
     @property
     def n_vertices(self) -> int:
@@ -54,6 +58,7 @@ class Mesh:
     def flipped(self) -> Mesh:
         """The same mesh with every cell's orientation reversed (and its normals)."""
         normals = None if self.normals is None else -self.normals
+        labels = None if self.cell_labels is None else self.cell_labels[:, ::-1].copy()
         return Mesh(
             self.vertices,
             self.cells[:, ::-1].copy(),
@@ -61,6 +66,7 @@ class Mesh:
             dict(self.info),
             normals,
             self.values,
+            labels,
         )
 
     def triangle_normals(self) -> np.ndarray:

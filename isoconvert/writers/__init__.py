@@ -55,7 +55,7 @@ class Writer:
     #: whether it writes block by block, so a mesh larger than memory can
     #: wait for it in temporary files (isoconvert.writers.chunks)
     streams: bool = False
-    #: per-vertex attributes it stores: "normals", "values"
+    #: attributes it stores: "normals", "values" (per vertex), "labels" (per cell)
     attributes: frozenset[str] = frozenset()
 
 
@@ -64,6 +64,7 @@ _TRIANGLES = frozenset({3})
 _SEGMENTS = frozenset({2})
 _BOTH = frozenset({2, 3})
 _NORMALS_VALUES = frozenset({"normals", "values"})
+_ALL_ATTRIBUTES = frozenset({"normals", "values", "labels"})
 for _writer in (
     Writer(
         "ply",
@@ -76,7 +77,7 @@ for _writer in (
         precision="adaptive",
         records_grid=True,
         streams=True,
-        attributes=_NORMALS_VALUES,
+        attributes=_ALL_ATTRIBUTES,
     ),
     Writer(
         "obj",
@@ -123,7 +124,7 @@ for _writer in (
         precision="adaptive",
         records_grid=True,
         streams=True,
-        attributes=_NORMALS_VALUES,
+        attributes=_ALL_ATTRIBUTES,
     ),
     Writer(
         "glb",
@@ -174,22 +175,35 @@ for _writer in (
 
 
 def attribute_writers(attribute: str) -> list[str]:
-    """Names of the formats that store a per-vertex ``attribute`` ("normals", "values")."""
+    """Names of the formats that store ``attribute``: "normals", "values" (per
+    vertex) or "labels" (per cell)."""
     return [name for name, w in WRITERS.items() if attribute in w.attributes]
 
 
-def check_attributes(writer: Writer, normals: bool, values: bool, name: object) -> None:
-    """Refuse per-vertex normals or values for a format that cannot store them.
+def check_attributes(
+    writer: Writer,
+    name: object,
+    *,
+    normals: bool = False,
+    values: bool = False,
+    labels: bool = False,
+) -> None:
+    """Refuse per-vertex normals or values, or per-cell labels, for a format
+    that cannot store them.
 
     Raises
     ------
     FormatError
     """
-    for attribute, wanted in (("normals", normals), ("values", values)):
-        if wanted and attribute not in writer.attributes:
+    wanted = {"normals": normals, "values": values, "labels": labels}
+    what = {"normals": "per-vertex normals", "values": "per-vertex values",
+            "labels": "per-triangle labels"}  # fmt: skip
+    option = {"normals": "--normals", "values": "--values", "labels": "--single-file"}
+    for attribute, asked in wanted.items():
+        if asked and attribute not in writer.attributes:
             raise FormatError(
-                f"{name}: {writer.name} cannot store per-vertex {attribute}; write "
-                f"{', '.join(attribute_writers(attribute))}, or leave out --{attribute}"
+                f"{name}: {writer.name} cannot store {what[attribute]}; write "
+                f"{', '.join(attribute_writers(attribute))}, or leave out {option[attribute]}"
             )
 
 

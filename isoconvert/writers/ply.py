@@ -15,7 +15,8 @@ from .text import write_rows
 def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
     """Write vertices as x, y, z (then ``nx, ny, nz`` and ``value``, float, when
     the mesh has normals and values) and cells as ``face`` (triangles) or
-    ``edge`` (segments) elements, indices int32.
+    ``edge`` (segments) elements, indices int32; faces of a label volume's
+    mesh also get ``inside_label`` and ``outside_label`` (int).
 
     Coordinates are ``double`` when ``mesh.info["stored_precision"]`` is
     "float64", else ``float`` (float32, rounded here); :func:`isoconvert.write_mesh` decides
@@ -51,8 +52,12 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
     if mesh.values is not None:
         header.append("property float value")
         columns.append(mesh.values.reshape(-1, 1))
+    labels = mesh.cell_labels
     if triangles:
         header += [f"element face {len(cells)}", "property list uchar int vertex_indices"]
+        if labels is not None:
+            # the labels on the two sides: normals point from the first to the second
+            header += ["property int inside_label", "property int outside_label"]
     else:
         header += [f"element edge {len(cells)}", "property int vertex1", "property int vertex2"]
     fh.write(("\n".join(header) + "\nend_header\n").encode("ascii"))
@@ -67,6 +72,11 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
             a = i * ROWS
             rows = [block.astype(stored)] + [c[a : a + ROWS].astype(stored) for c in columns[1:]]
             write_rows(fh, np.hstack(rows), row)
+        if triangles and labels is not None:
+            for i, block in enumerate(row_chunks(cells)):
+                rows = np.hstack([block, labels[i * ROWS : (i + 1) * ROWS]])
+                write_rows(fh, rows, "3 %d %d %d %d %d\n")
+            return
         write_rows(fh, cells, "3 %d %d %d\n" if triangles else "%d %d\n")
         return
     if len(columns) == 1:
@@ -88,12 +98,17 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
             if mesh.values is not None:
                 out["value"] = mesh.values[a : a + ROWS]
             fh.write(out.tobytes())
-    record = np.dtype([("n", "u1"), ("v", "<i4", (3,))]) if triangles else np.dtype("<i4")
-    for block in row_chunks(cells):
+    fields = [("n", "u1"), ("v", "<i4", (3,))]
+    if labels is not None:
+        fields.append(("labels", "<i4", (2,)))
+    record = np.dtype(fields) if triangles else np.dtype("<i4")
+    for i, block in enumerate(row_chunks(cells)):
         if triangles:
             out = np.empty(len(block), dtype=record)
             out["n"] = 3
             out["v"] = block
+            if labels is not None:
+                out["labels"] = labels[i * ROWS : (i + 1) * ROWS]
         else:
             out = block.astype(record)
         fh.write(out.tobytes())

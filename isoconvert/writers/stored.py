@@ -37,7 +37,13 @@ def _check_cells(writer: Writer, mesh: Mesh, name: str | Path) -> None:
             f"{name}: {kind} {row} of the mesh refers to vertex {index}, "
             f"but the mesh has {n} vertices"
         )
-    check_attributes(writer, mesh.normals is not None, mesh.values is not None, name)
+    check_attributes(
+        writer,
+        name,
+        normals=mesh.normals is not None,
+        values=mesh.values is not None,
+        labels=mesh.cell_labels is not None,
+    )
 
 
 def _stored(
@@ -106,7 +112,7 @@ def _stored(
         normals = np.asarray(normals, dtype=np.float32)
     if values is not None:
         values = np.asarray(values, dtype=np.float32)
-    return Mesh(vertices, cells, None, info, normals, values)
+    return Mesh(vertices, cells, None, info, normals, values, mesh.cell_labels)
 
 
 def _float32_loss(vertices: np.ndarray, cells: np.ndarray, mesh: Mesh) -> tuple:

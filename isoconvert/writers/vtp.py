@@ -13,6 +13,8 @@ Layout of the binary file (``byte_order="LittleEndian"``,
         <Piece NumberOfPoints="V" NumberOfPolys="C" ...>   (NumberOfLines for segments)
           <PointData Normals="Normals" Scalars="value">     (only with normals or values)
             Normals (Float32, 3 components), value (Float32) </PointData>
+          <CellData Scalars="labels">                       (only for label meshes)
+            labels (Int32, 2 components: inside, outside) </CellData>
           <Points> <DataArray type="Float32|Float64" NumberOfComponents="3" .../> </Points>
           <Polys>  connectivity (Int64), offsets (Int64: 3, 6, 9, ...) </Polys>
         </Piece>
@@ -55,7 +57,8 @@ def write_vtp(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
     """Write vertices as ``Points`` and cells as ``Polys`` (triangles) or
     ``Lines`` (segments), indices Int64; normals and values, when the mesh has
     them, as Float32 ``PointData`` arrays ``Normals`` and ``value`` (the active
-    normals and scalars).
+    normals and scalars); a label mesh's cell labels as the Int32 ``CellData``
+    array ``labels`` (2 components: inside, outside).
 
     Points are Float64 when ``mesh.info["stored_precision"]`` is "float64",
     else Float32 (rounded here); :func:`isoconvert.write_mesh` decides, as
@@ -92,9 +95,11 @@ def write_vtp(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
         point_data.append(("Normals", mesh.normals))
     if mesh.values is not None:
         point_data.append(("value", mesh.values.reshape(-1, 1)))
+    cell_data = [] if mesh.cell_labels is None else [("labels", mesh.cell_labels)]
     # byte sizes of the appended arrays (in file order), each after its UInt64 count
     sizes = [len(strings)]
     sizes += [n_points * data.shape[1] * 4 for _, data in point_data]
+    sizes += [n_cells * data.shape[1] * 4 for _, data in cell_data]
     sizes += [n_points * 3 * (8 if double else 4), n_cells * size * 8, n_cells * 8]
     starts = np.concatenate([[0], np.cumsum(np.asarray(sizes) + 8)[:-1]]).tolist()
     offsets = iter([None] * len(sizes) if ascii else starts)
@@ -132,6 +137,15 @@ def write_vtp(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
             parts += ["\n".join(head), (data, np.float32, "%.9g")]
             head = ["        </DataArray>"] if ascii else []
         head.append("      </PointData>")
+    if cell_data:
+        # the labels on the two sides of each cell: normals point from the first to the second
+        head.append('      <CellData Scalars="labels">')
+        for name, data in cell_data:
+            attrs = f'type="Int32" Name="{name}" NumberOfComponents="{data.shape[1]}"'
+            head.append("        " + array("DataArray", attrs, next(offsets)))
+            parts += ["\n".join(head), (data, np.int32, "%d")]
+            head = ["        </DataArray>"] if ascii else []
+        head.append("      </CellData>")
     kind_of_points = f'type="{kind}" Name="Points" NumberOfComponents="3"'
     head += ["      <Points>", "        " + array("DataArray", kind_of_points, next(offsets))]
     digits = "%.17g" if double else "%.9g"
@@ -164,7 +178,7 @@ def write_vtp(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
     head += ['  <AppendedData encoding="raw">', "   _"]
     fh.write((text + "\n" + "\n".join(head)).encode("ascii"))
     fh.write(np.uint64(len(strings)).tobytes() + strings)
-    little = {np.float32: "<f4", np.float64: "<f8", np.int64: "<i8"}
+    little = {np.float32: "<f4", np.float64: "<f8", np.int64: "<i8", np.int32: "<i4"}
     blocks = [p for p in parts if not isinstance(p, str)]
     for (data, dtype, _), nbytes in zip(blocks, sizes[1:], strict=True):
         fh.write(np.uint64(nbytes).tobytes())

@@ -1,0 +1,223 @@
+"""Label surfaces by Surface Nets (isoconvert.extract.labels)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import dataset, directed_edges_consistent, edge_use
+
+from isoconvert.errors import IsoconvertError, LevelError, VolumeError
+from isoconvert.extract.labels import LabelMeshes, SmoothingOptions, label_surfaces
+from isoconvert.report import check_mesh
+from isoconvert.volume import Volume
+
+
+def closed_by_index(cells: np.ndarray) -> bool:
+    """Every edge in exactly two triangles, used once each way (by vertex index)."""
+    _, counts = edge_use(cells)
+    return bool(np.all(counts == 2)) and directed_edges_consistent(cells)
+
+
+def boundary_faces(mask: np.ndarray) -> int:
+    """Faces of the voxels of ``mask`` on the six sides of the grid."""
+    return sum(
+        int(side.sum())
+        for side in (mask[0], mask[-1], mask[:, 0], mask[:, -1], mask[:, :, 0], mask[:, :, -1])
+    )
+
+
+# --- a real binary segmentation ----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def cochlea() -> Volume:
+    from isoconvert import read_volume
+
+    return read_volume(dataset("bat-cochlea-volume.tif"))
+
+
+def test_cochlea_blocky_encloses_exactly_the_voxels(cochlea):
+    result = label_surfaces(cochlea, smoothing=0)
+    assert result.labels == [255]  # binary 0/255: the object is label 255
+    mesh = result[255]
+    voxels = int(np.count_nonzero(cochlea.data))
+    assert mesh.signed_volume() == pytest.approx(voxels * np.prod(cochlea.spacing), abs=1e-6)
+    # closed and oriented by index (split vertices coincide until smoothed, so
+    # the position-based report would merge them back)
+    assert closed_by_index(mesh.cells)
+    # vertices at dual-cell centres: half-integers in index units
+    frac = mesh.vertices / cochlea.spacing - 0.5
+    assert np.array_equal(frac, np.round(frac))
+    assert mesh.info["label"] == 255 and mesh.info["method"] == "labels"
+
+
+def test_cochlea_smoothed_is_a_closed_manifold(cochlea):
+    result = label_surfaces(cochlea)  # VTK-like defaults: 16 iterations
+    mesh = result[255]
+    report = check_mesh(mesh)
+    for name in ("watertight", "manifold", "oriented", "no-degenerate", "no-duplicates"):
+        assert report.checks[name], (name, report.problems)
+    voxels = int(np.count_nonzero(cochlea.data))
+    volume = mesh.signed_volume()
+    assert volume > 0
+    assert abs(volume / voxels - 1) < 0.05
+    assert result.split_vertices > 0  # the scan has edge contacts (see the module notes)
+    # every vertex stays within its dual cell (constraint 0.5 voxel)
+    blocky = label_surfaces(cochlea, smoothing=0)[255]
+    assert np.abs(mesh.vertices - blocky.vertices).max() <= 0.5 + 1e-9
+
+
+def test_cochlea_counts_match_vtk(cochlea):
+    vtk = pytest.importorskip("vtk")
+    from vtk.util import numpy_support
+
+    zyx = np.ascontiguousarray(cochlea.data.T)
+    image = vtk.vtkImageData()
+    image.SetDimensions(*zyx.shape[::-1])
+    image.GetPointData().SetScalars(numpy_support.numpy_to_vtk(zyx.ravel(), deep=True))
+    nets = vtk.vtkSurfaceNets3D()
+    nets.SetInputData(image)
+    nets.SetLabel(0, 255)
+    nets.SmoothingOff()
+    nets.Update()
+    quads = nets.GetOutput().GetNumberOfCells()
+    ours = label_surfaces(cochlea, smoothing=0)
+    # VTK leaves the surface open where the object meets the grid's sides; we
+    # close it there, one quad per voxel face on the sides
+    assert ours.combined.n_cells == 2 * (quads + boundary_faces(cochlea.data > 0))
+    points = nets.GetOutput().GetNumberOfPoints()
+    assert abs(ours.combined.n_vertices - points) < 0.01 * points
+
+
+# --- a synthetic atlas -------------------------------------------------------------------
+
+
+def atlas(direction=None) -> Volume:
+    """Three touching boxes and a ball, some on the grid's sides, anisotropic spacing."""
+    zyx = np.zeros((14, 16, 18), dtype=np.int16)  # (Z, Y, X)
+    zyx[0:8, 0:9, 0:9] = 3  # touches three sides of the grid
+    zyx[0:8, 0:9, 9:18] = 7  # touches 3 along x = 9, and the grid's x-high side
+    zyx[8:14, 0:16, 0:18] = 5  # a slab on top of both, the whole z-high side
+    z, y, x = np.indices(zyx.shape)
+    ball = (x - 9) ** 2 + (y - 10) ** 2 + (z - 6) ** 2 < 9
+    zyx[ball] = 9  # touches 3, 7, 5 and background
+    return Volume.from_zyx(
+        zyx, spacing=(0.5, 0.8, 1.7), origin=(10.0, -3.0, 2.5), direction=direction
+    )
+
+
+@pytest.mark.parametrize("iterations", [0, 16])
+@pytest.mark.parametrize("mirror", [False, True])
+def test_atlas_labels_closed_and_share_boundaries(iterations, mirror):
+    direction = np.diag([-1.0, 1.0, 1.0]) if mirror else None  # left-handed: a mirror
+    volume = atlas(direction)
+    result = label_surfaces(volume, smoothing=iterations)
+    assert isinstance(result, LabelMeshes)
+    assert result.labels == [3, 5, 7, 9]
+    voxel = float(np.prod(volume.spacing))
+    data = volume.data
+    total = 0.0
+    for label in result.labels:
+        mesh = result[label]
+        assert mesh.info["label"] == label
+        assert closed_by_index(mesh.cells), label
+        if iterations:
+            report = check_mesh(mesh)
+            assert report.checks["watertight"] and report.checks["manifold"], label
+            assert report.checks["oriented"], label
+        vol = mesh.signed_volume()
+        assert vol > 0, label  # normals point out of the label, mirrored or not
+        if iterations == 0:
+            assert vol == pytest.approx(np.count_nonzero(data == label) * voxel)
+        total += vol
+        # the per-label mesh is part of the combined one, as documented
+        vmap, fmap = result.vertex_map[label], result.face_map[label]
+        assert np.array_equal(mesh.vertices, result.combined.vertices[vmap])
+        expected = result.combined.cells[fmap].copy()
+        out = result.boundary_labels[fmap, 1] == label
+        expected[out] = expected[out][:, ::-1]
+        assert np.array_equal(vmap[mesh.cells], expected)
+    union = label_surfaces(
+        Volume((data > 0).astype(np.uint8), volume.spacing, volume.origin, volume.direction),
+        smoothing=iterations,
+    )[1]
+    if iterations == 0:
+        assert total == pytest.approx(np.count_nonzero(data) * voxel)
+        assert union.signed_volume() == pytest.approx(total)
+    # touching labels share their boundary: same vertices, opposite orientation
+    for a, b in [(3, 7), (3, 5), (7, 5), (9, 3), (9, 5), (9, 7)]:
+        tris_a = {tuple(t) for t in result.vertex_map[a][result[a].cells]}
+        tris_b = {tuple(t) for t in result.vertex_map[b][result[b].cells]}
+        between = np.flatnonzero(
+            np.isin(result.boundary_labels[:, 0], [a, b])
+            & np.isin(result.boundary_labels[:, 1], [a, b])
+        )
+        assert len(between) > 0, (a, b)
+        for face in between:
+            tri = tuple(result.combined.cells[face])
+            rev = tuple(result.combined.cells[face][::-1])
+            inside = result.boundary_labels[face, 0]
+            mine, theirs = (tris_a, tris_b) if inside == a else (tris_b, tris_a)
+            assert tri in mine and rev in theirs and tri not in theirs
+
+
+def test_atlas_normals_point_out_of_the_label():
+    volume = atlas()
+    result = label_surfaces(volume, [7], smoothing=0)
+    mesh = result[7]
+    centers = mesh.vertices[mesh.cells].mean(axis=1)
+    step = 0.01 * mesh.triangle_normals()
+    inverse = np.linalg.inv(volume.affine)
+    ahead = np.rint((centers + step - volume.origin) @ inverse.T).astype(int)
+    behind = np.rint((centers - step - volume.origin) @ inverse.T).astype(int)
+    data = np.pad(volume.data, 1)  # background around, for the faces on the sides
+    assert np.all(data[tuple((behind + 1).T)] == 7)
+    assert np.all(data[tuple((ahead + 1).T)] != 7)
+
+
+def test_selected_labels_and_the_grid_side():
+    volume = atlas()
+    result = label_surfaces(volume, labels=[5], smoothing=SmoothingOptions(iterations=4))
+    assert result.labels == [5]
+    # faces between two labels not asked for are left out; 5 still closed, on the grid's sides too
+    assert set(np.unique(result.boundary_labels[:, 0])) == {5}
+    mesh = result[5]
+    assert closed_by_index(mesh.cells)
+    assert check_mesh(mesh).checks["watertight"]
+    top = volume.origin[2] + volume.spacing[2] * (volume.shape[2] - 0.5)
+    assert np.isclose(mesh.vertices[:, 2].max(), top)  # closed half a voxel beyond the grid
+
+
+def test_edge_and_corner_contacts_stay_manifold():
+    data = np.zeros((6, 6, 6), dtype=np.uint8)
+    data[1, 1, 1:4] = data[2, 2, 1:4] = 1  # two rods touching along an edge
+    data[4, 4, 4] = data[3, 3, 3] = 1  # two voxels touching at a corner
+    result = label_surfaces(Volume(data), smoothing=0)
+    assert result.split_vertices > 0
+    assert closed_by_index(result[1].cells)
+    smoothed = label_surfaces(Volume(data))
+    assert check_mesh(smoothed[1]).checks["manifold"]
+
+
+# --- errors --------------------------------------------------------------------------------
+
+
+def test_errors():
+    volume = atlas()
+    with pytest.raises(VolumeError, match="not in the volume"):
+        label_surfaces(volume, labels=[4])
+    with pytest.raises(VolumeError, match="background"):
+        label_surfaces(volume, labels=[0, 3])
+    with pytest.raises(VolumeError, match="whole numbers"):
+        label_surfaces(Volume(np.full((3, 3, 3), 1.5)))
+    with pytest.raises(VolumeError, match="3D"):
+        label_surfaces(Volume(np.ones((4, 4), dtype=np.uint8)))
+    with pytest.raises(LevelError, match="background"):
+        label_surfaces(Volume(np.zeros((3, 3, 3), dtype=np.uint8)))
+    with pytest.raises(VolumeError, match="iterations"):
+        label_surfaces(volume, smoothing=-1)
+    # whole-number floats are labels
+    floats = Volume(volume.data.astype(np.float32), volume.spacing, volume.origin)
+    assert label_surfaces(floats, smoothing=0).labels == [3, 5, 7, 9]
+    for err in (VolumeError, LevelError):
+        assert issubclass(err, IsoconvertError)
