@@ -709,11 +709,15 @@ class BatchSettings:
         by a task on that cluster (:func:`isoconvert.distributed.run_on_cluster`),
         whose workers must see the inputs and the output folder at the same
         paths. None runs here, in worker processes.
+    previews : bool
+        Write a thumbnail beside each mesh (:func:`isoconvert.preview.batch_thumbnail`),
+        in the worker that made it, so the mesh is not read again.
     """
 
     options: ConvertOptions = field(default_factory=ConvertOptions)
     require: tuple[str, ...] = ()
     scheduler: str | None = None
+    previews: bool = False
 
 
 def run_one(job: Job, settings: BatchSettings) -> Outcome:
@@ -760,6 +764,12 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
         if failed:
             outcome.status = "check-failed"
             outcome.message = f"{job.output}: required check failed: {', '.join(failed)}"
+    if settings.previews and mesh.is_triangles:
+        from .preview import batch_thumbnail
+
+        # a thumbnail that cannot be made costs the picture, not the mesh
+        why = batch_thumbnail(mesh, result.written, job.output, mesh.info.get("grid"))
+        outcome.message = "; ".join(m for m in (outcome.message, why) if m)
     outcome.seconds = time.perf_counter() - start
     return outcome
 

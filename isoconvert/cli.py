@@ -221,9 +221,10 @@ FillCavitiesOpt = Annotated[
     ),
 ]
 SmoothOpt = Annotated[
-    int,
+    int | None,
     typer.Option(
-        help="Smoothing iterations (0: none); keeps the volume, grid-face vertices stay on it.",
+        help="Smoothing iterations (default 0: none; with --labels, relaxation iterations, "
+        "default 16); keeps the volume, grid-face vertices stay on it.",
         rich_help_panel=_POST,
     ),
 ]
@@ -410,14 +411,14 @@ def convert(
     input: Annotated[str, typer.Argument(help="Volume file, folder of TIFF slices, or glob.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Mesh file to write.")],
     level: Annotated[
-        list[str],
+        list[str] | None,
         typer.Option(
             "--level",
             "-l",
             help="Isovalue, or 'auto' for Otsu's threshold; several --level write one mesh "
             "each (NAME_levelL.ply).",
         ),
-    ],
+    ] = None,
     method: Annotated[
         str | None,
         typer.Option(
@@ -475,6 +476,14 @@ def convert(
     ] = None,
     require: RequireOpt = None,
     examples: ExamplesOpt = 5,
+    preview: Annotated[
+        Path | None,
+        typer.Option(
+            help="Also write a picture of the mesh with its problems marked, as FILE.png "
+            "(needs isoconvert\\[render]).",
+            rich_help_panel="Output",
+        ),
+    ] = None,
     quiet: Annotated[bool, _flag("--quiet", "-q", help="Print only errors.")] = False,
     verbose: VerboseOpt = False,
     input_format: InputFormatOpt = None,
@@ -506,7 +515,7 @@ def convert(
     keep: KeepOpt = None,
     min_size: MinSizeOpt = None,
     fill_cavities: FillCavitiesOpt = False,
-    smooth: SmoothOpt = 0,
+    smooth: SmoothOpt = None,
     smooth_method: SmoothMethodOpt = "sinc",
     passband: PassbandOpt = 0.1,
     decimate: DecimateOpt = None,
@@ -528,15 +537,48 @@ def convert(
         ),
     ] = None,
     scheduler: SchedulerOpt = None,
+    labels: Annotated[
+        bool,
+        _flag(
+            "--labels",
+            help="A label volume: one closed surface per label (Surface Nets), NAME_labelL.ply; "
+            "--smooth N sets its relaxation iterations (default 16).",
+            rich_help_panel="Labels",
+        ),
+    ] = False,
+    label: Annotated[
+        str | None,
+        typer.Option(
+            help="Only these labels, e.g. 3,7 (implies --labels).", rich_help_panel="Labels"
+        ),
+    ] = None,
+    single_file: Annotated[
+        bool,
+        _flag(
+            "--single-file",
+            help="Labels: one mesh, each triangle with the labels on its two sides (PLY, VTP).",
+            rich_help_panel="Labels",
+        ),
+    ] = False,
+    background: Annotated[
+        int, typer.Option(help="Labels: the value of no label.", rich_help_panel="Labels")
+    ] = 0,
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
     _quiet_third_party()
     from .report import parse_requirements
 
     required = parse_requirements(require)
-    if report not in (None, "-"):
-        check_output(report, force)  # before the work: a bad report name must not cost a mesh
-    from .convert import convert_levels, level_outputs
+    from .convert import convert_labels, convert_levels, level_outputs
+
+    wanted = _label_list(label)
+    labels = labels or wanted is not None or single_file
+    if labels and level:
+        raise IsoconvertError("--labels extracts every label's boundary: leave out --level")
+    if not labels and not level:
+        raise IsoconvertError(
+            "convert needs --level (a number, or auto), or --labels for a label volume"
+        )
 
     post = _post_options(
         close,
@@ -550,15 +592,32 @@ def convert(
         decimate,
         max_error,
     )
-    reports = level_outputs(report, level) if report not in (None, "-") else None
-    for path in reports or ():
-        check_output(path, force)  # before the work: a bad report name must not cost a mesh
+    reports = None
+    if report not in (None, "-") and not labels:
+        reports = level_outputs(report, level)
+        for path in reports:
+            check_output(path, force)  # before the work: a bad report name must not cost a mesh
+    if preview is not None:  # before the work: no renderer or a bad name must not cost a mesh
+        from .preview import require_renderer
+
+        require_renderer()
+        check_output(preview, force)
     start = time.perf_counter()
     with _stage_display(quiet, verbose) as (on_progress, on_status):
-        results = convert_levels(
+        if labels:
+            run, first = convert_labels, wanted or ()
+            extra = {
+                "single_file": single_file,
+                "background": background,
+                "label_smoothing": smooth,
+            }
+        else:
+            run, first, extra = convert_levels, level, {}
+        results = run(
             input,
             output,
-            level,
+            first,
+            **extra,
             method=method,
             format=format,
             ascii=ascii,
@@ -595,6 +654,9 @@ def convert(
     if not quiet:
         for note in results[0].volume.notes:
             print(f"note: {note}", file=sys.stderr)
+    if labels and report not in (None, "-"):
+        reports = [Path(report).with_name(f"{Path(report).stem}_{r.output.stem}.json")
+                   for r in results] if len(results) > 1 else [report]  # fmt: skip
     failed = []
     for n, result in enumerate(results):
         if not quiet:
@@ -604,16 +666,49 @@ def convert(
             slabs = mesh.info.get("blocks", 1)
             if slabs > 1:
                 kind += f" in {slabs} slabs"
-            steps = f", {', '.join(post.steps)}" if post.steps else ""
+            steps = f", {', '.join(post.steps)}" if post.steps and not labels else ""
+            what = mesh.info["level"]
+            if labels and single_file:
+                what = f"labels {what}"
+            else:
+                what = f"label {what:g}" if labels else f"level {what:g}"
             print(
                 f"wrote {result.output}: {mesh.n_vertices:,} vertices, {mesh.n_cells:,} {kind} "
-                f"(level {mesh.info['level']:g}{steps}, {time.perf_counter() - start:.2f} s)"
+                f"({what}{steps}, {time.perf_counter() - start:.2f} s)"
             )
         if report is not None or required:
             target = reports[n] if reports else report
             failed += _report_result(result, target, required, examples, force, quiet)
+        if preview is not None:
+            _write_preview(result, preview, len(results), force, quiet)
     if failed:
         raise typer.Exit(EXIT_CHECK_FAILED)
+
+
+def _write_preview(result, preview: Path, count: int, force: bool, quiet: bool) -> None:
+    """The picture of one mesh convert wrote: ``preview`` itself for one mesh,
+    else ``PREVIEW_MESHNAME.png`` per mesh."""
+    from .preview import render_preview, write_preview
+
+    target = (
+        preview if count == 1 else preview.with_name(f"{preview.stem}_{result.output.stem}.png")
+    )
+    picture = render_preview(result.mesh, checked=result.written, grid=result.mesh.info.get("grid"))
+    write_preview(picture, target, force)
+    if not quiet:
+        print(f"wrote {target}: preview", file=sys.stderr)
+
+
+def _label_list(text: str | None) -> tuple[int, ...] | None:
+    """The labels of --label 3,7 (None when not given)."""
+    if text is None:
+        return None
+    try:
+        return tuple(int(p) for p in text.replace(",", " ").split())
+    except ValueError:
+        raise IsoconvertError(
+            f"--label takes whole numbers, e.g. --label 3,7; got {text!r}"
+        ) from None
 
 
 def _post_options(
@@ -638,7 +733,7 @@ def _post_options(
         keep=1 if largest else keep,
         min_size=min_size,
         fill_cavities=fill_cavities,
-        smooth=smooth,
+        smooth=smooth or 0,
         smooth_method=smooth_method,
         passband=passband,
         decimate=decimate,
@@ -727,6 +822,32 @@ def check(
     _emit_report(checked, "-", required, as_json=as_json, force=force, quiet=quiet)
 
 
+@app.command(cls=_Command)
+def preview(
+    mesh_file: Annotated[Path, typer.Argument(help="PLY, OBJ, STL, OFF, VTP, GLB or 3MF file.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="PNG file to write.")],
+    size: Annotated[str, typer.Option(help="Picture size in pixels, WIDTHxHEIGHT.")] = "1024x768",
+    background: Annotated[
+        str, typer.Option(help="Background colour: a name or #rrggbb.")
+    ] = "white",
+    force: Annotated[bool, _flag("--force", "-f", help="Overwrite the output.")] = False,
+    quiet: Annotated[bool, _flag("--quiet", "-q", help="Print only errors.")] = False,
+) -> None:
+    """Picture a mesh from four views, with holes and non-manifold parts marked
+    (needs isoconvert\\[render])."""
+    _quiet_third_party()
+    from .preview import parse_colour, parse_size, preview_file
+
+    start = time.perf_counter()
+    picture = preview_file(
+        mesh_file, output, size=parse_size(size), background=parse_colour(background), force=force
+    )
+    if not quiet:
+        found = {k: v for k, v in (picture.marks.counts if picture.marks else {}).items() if v}
+        what = ", ".join(f"{v:,} {k.replace('_', ' ')}" for k, v in found.items()) or "no problems"
+        print(f"wrote {output}: {what} marked ({time.perf_counter() - start:.2f} s)")
+
+
 def _emit_report(checked, target, required, *, as_json, force, quiet) -> None:
     """Print the report (target "-") or write it as JSON; exit 4 when a required check fails."""
     from .report import format_report
@@ -810,12 +931,20 @@ def batch(
     keep: KeepOpt = None,
     min_size: MinSizeOpt = None,
     fill_cavities: FillCavitiesOpt = False,
-    smooth: SmoothOpt = 0,
+    smooth: SmoothOpt = None,
     smooth_method: SmoothMethodOpt = "sinc",
     passband: PassbandOpt = 0.1,
     decimate: DecimateOpt = None,
     max_error: MaxErrorOpt = None,
     scheduler: SchedulerOpt = None,
+    previews: Annotated[
+        bool,
+        _flag(
+            "--previews",
+            help="Also a thumbnail (NAME.png) beside each mesh and an index.html contact sheet "
+            "in the output folder (needs isoconvert\\[render]).",
+        ),
+    ] = False,
 ) -> None:
     """Convert many volumes: files, folders (--recursive) and globs, in parallel."""
     _quiet_third_party()
@@ -825,7 +954,7 @@ def batch(
 
     required = parse_requirements(require)
     writer = WRITERS.get(format)
-    check_attributes(writer, normals, False, "--format")
+    check_attributes(writer, "--format", normals=normals)
     post = _post_options(
         close,
         largest,
@@ -839,6 +968,10 @@ def batch(
         max_error,
     )
     batching.check_jobs(jobs)
+    if previews:  # before the work: without a renderer there would be no pictures
+        from .preview import require_renderer
+
+        require_renderer()
     if level is None and levels is None:
         raise VolumeError("batch needs --level (a number or auto) or --levels FILE")
     if out_dir.exists() and not out_dir.is_dir():
@@ -898,6 +1031,7 @@ def batch(
         ),
         tuple(required),
         scheduler=scheduler_address(scheduler),
+        previews=previews,
     )
     created = batching.make_folders(out_dir) if work else []
     try:
@@ -912,6 +1046,14 @@ def batch(
 
             with atomic_output(summary, force=True) as fh:
                 fh.write(batching.summary_bytes(outcomes, summary.suffix.lower()))
+        if previews and out_dir.is_dir():
+            from dataclasses import asdict
+
+            from .preview import SheetEntry, write_contact_sheet
+
+            fields = ("input", "output", "status", "level", "vertices", "cells", "message")
+            entries = [SheetEntry(**{k: asdict(o)[k] for k in fields}) for o in outcomes]
+            write_contact_sheet(entries, out_dir)
     finally:
         batching.remove_empty_folders(created)  # a run that made nothing leaves no folder
     if not quiet:
@@ -1069,6 +1211,24 @@ def _print_batch_table(outcomes) -> None:
 def info(
     input: Annotated[str, typer.Argument(help="Volume file, folder of TIFF slices, or glob.")],
     as_json: Annotated[bool, _flag("--json", help="Print JSON instead of text.")] = False,
+    plot: Annotated[
+        Path | None,
+        typer.Option(
+            "--plot",
+            help="Also write a PNG: the histogram with the suggested levels, and the middle "
+            "slices with the contour at --level (needs pip install isoconvert[plot]).",
+        ),
+    ] = None,
+    plot_level: Annotated[
+        str | None,
+        typer.Option(
+            "--level",
+            "-l",
+            help="--plot: the level to contour: a number, or otsu, p50, p90, p99, auto "
+            "(default: the first suggested level, otsu).",
+        ),
+    ] = None,
+    force: Annotated[bool, _flag("--force", "-f", help="Overwrite the --plot file.")] = False,
     input_format: InputFormatOpt = None,
     shape: ShapeOpt = None,
     dtype: DtypeOpt = None,
@@ -1087,6 +1247,15 @@ def info(
     """Describe a volume (size, spacing, value range, histogram) and suggest isovalues."""
     _quiet_third_party()
     from .readers import read_volume
+
+    if plot is not None:
+        from .infoplot import require_matplotlib
+
+        # before reading: a missing extra or an unwritable --plot fails at once
+        require_matplotlib()
+        check_output(plot, force)
+    elif plot_level is not None:
+        raise VolumeError("--level is for --plot (the contour drawn on the slices); add --plot")
     from .stats import histogram, suggested_levels
 
     kwargs = _read_kwargs(
@@ -1108,6 +1277,11 @@ def info(
     volume = read_volume(input, format=kwargs.pop("input_format"), **kwargs)
     hist = histogram(volume.samples)
     levels = suggested_levels(hist) if hist.counts.sum() else {}
+    if plot is not None:
+        from .infoplot import write_info_plot
+
+        # the same histogram and levels as printed below, so the marks equal --json's
+        write_info_plot(volume, plot, plot_level, hist=hist, levels=levels, force=force)
     summary = {
         "source": volume.source,
         "shape": list(volume.shape),

@@ -158,6 +158,8 @@ for _writer in (
         False,
         _SEGMENTS,
         precision="as given",
+        # not in a header: the grid's extent is the picture's frame and size
+        records_grid=True,
     ),
     Writer(
         "geojson",

@@ -1,0 +1,117 @@
+"""Label volumes from the command line and the API: --labels, --label, --single-file (issue 12)."""
+
+from __future__ import annotations
+
+import nrrd
+import numpy as np
+import pytest
+from conftest import dataset
+
+from isoconvert import check_mesh
+from isoconvert.cli import main
+from isoconvert.convert import convert_labels
+from isoconvert.extract.labels import label_surfaces
+from isoconvert.meshfile import read_mesh
+from isoconvert.volume import Volume
+
+vtk = pytest.importorskip("vtk")
+from vtk.util.numpy_support import vtk_to_numpy  # noqa: E402
+
+SPACING = (0.5, 0.5, 1.0)
+
+
+@pytest.fixture
+def atlas(tmp_path):
+    """Two boxes (3, 7) touching each other and the grid's z = 0 face, and a ball (9)."""
+    x, y, z = np.meshgrid(*(np.arange(30),) * 3, indexing="ij")
+    labels = np.zeros((30, 30, 30), np.uint8)
+    labels[2:15, 2:20, 0:12] = 3
+    labels[15:28, 2:20, 0:12] = 7
+    labels[((x - 15) ** 2 + (y - 20) ** 2 + (z - 20) ** 2) < 64] = 9
+    path = tmp_path / "atlas.nrrd"
+    nrrd.write(str(path), labels, {"spacings": list(SPACING)}, index_order="F")
+    return path, labels
+
+
+def test_one_closed_file_per_label(atlas, tmp_path):
+    path, labels = atlas
+    out = tmp_path / "out" / "atlas.ply"
+    out.parent.mkdir()
+    assert main(["convert", str(path), "--labels", "-o", str(out), "--smooth", "0", "-q"]) == 0
+    names = sorted(p.name for p in out.parent.iterdir())
+    assert names == ["atlas_label3.ply", "atlas_label7.ply", "atlas_label9.ply"]
+    for value in (3, 7, 9):
+        mesh = read_mesh(out.parent / f"atlas_label{value}.ply")
+        report = check_mesh(mesh).to_dict()
+        assert report["checks"]["watertight"] and report["checks"]["oriented"]
+        # the blocky surface encloses exactly the label's voxels
+        voxels = np.count_nonzero(labels == value) * np.prod(SPACING)
+        assert np.isclose(mesh.signed_volume(), voxels)
+
+
+def test_files_equal_the_api_and_share_boundaries(atlas, tmp_path):
+    path, labels = atlas
+    results = convert_labels(path, tmp_path / "a.ply", (3, 7))
+    assert [r.output.name for r in results] == ["a_label3.ply", "a_label7.ply"]
+    surfaces = label_surfaces(Volume(labels, spacing=SPACING), (3, 7))
+    for result, value in zip(results, (3, 7), strict=True):
+        read = read_mesh(result.output)
+        assert np.array_equal(read.cells, surfaces[value].cells)
+        assert np.allclose(read.vertices, surfaces[value].vertices, atol=1e-5)
+    # the faces between 3 and 7 are the same triangles, opposite ways round
+    three, seven = (r.mesh for r in results)
+    shared3 = {tuple(t) for t in np.round(three.vertices[three.cells], 6).reshape(-1, 9)}
+    shared7 = {tuple(t) for t in np.round(seven.vertices[seven.cells[:, ::-1]], 6).reshape(-1, 9)}
+    # every face between the two boxes (18 x 12 sample faces, two triangles each)
+    assert len(shared3 & shared7) == 2 * 18 * 12
+
+
+def test_single_file_holds_both_labels_of_each_triangle(atlas, tmp_path):
+    path, labels = atlas
+    out = tmp_path / "a.vtp"
+    assert main(["convert", str(path), "--single-file", "-o", str(out), "-q"]) == 0
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(str(out))
+    reader.Update()
+    data = reader.GetOutput()
+    pairs = vtk_to_numpy(data.GetCellData().GetArray("labels"))
+    surfaces = label_surfaces(Volume(labels, spacing=SPACING))
+    assert np.array_equal(pairs, surfaces.boundary_labels)
+    assert {tuple(p) for p in pairs.tolist()} == {(3, 0), (7, 0), (9, 0), (3, 7)}
+    ply = tmp_path / "a.ply"
+    assert main(["convert", str(path), "--single-file", "-o", str(ply), "-q", "--ascii"]) == 0
+    lines = ply.read_text().splitlines()
+    assert "property int inside_label" in lines and "property int outside_label" in lines
+    faces = [line.split() for line in lines if line.startswith("3 ")]
+    got = np.array([[int(f[4]), int(f[5])] for f in faces])
+    assert np.array_equal(got, surfaces.boundary_labels)
+
+
+def test_real_binary_scan(tmp_path):
+    src = dataset("bat-cochlea-volume.tif")
+    out = tmp_path / "cochlea.ply"
+    assert main(["convert", str(src), "--labels", "-o", str(out), "-q"]) == 0
+    (written,) = tmp_path.glob("cochlea_label*.ply")
+    report = check_mesh(read_mesh(written)).to_dict()
+    assert all(report["checks"][name] for name in ("watertight", "manifold", "oriented"))
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--labels", "-l", "3"], "leave out --level"),
+        (["--label", "3,5"], "label 5 not in the volume; labels present: 3, 7, 9"),
+        (["--label", "3,x"], "--label takes whole numbers"),
+        (["--single-file", "--format", "stl"], "cannot store per-triangle labels"),
+        (["--labels", "--normals"], "leave them out with --labels"),
+        (["--single-file", "--largest"], "would break the shared boundaries"),
+        ([], "convert needs --level"),
+    ],
+)
+def test_label_mistakes_are_one_line(atlas, tmp_path, capsys, extra, message):
+    path, _ = atlas
+    out = tmp_path / "x.ply"
+    code = main(["convert", str(path), "-o", str(out), *extra])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and len(err) == 1 and message in err[0]
+    assert not list(tmp_path.glob("x*"))
