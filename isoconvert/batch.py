@@ -14,13 +14,13 @@ import json
 import os
 import time
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from .convert import ConvertOptions
+from .convert import ConvertOptions, level_outputs
 from .errors import InputNotFoundError, IsoconvertError, OutputError
 from .quiet import silence_third_party
 from .readers import READERS, format_suffix, is_dicom_file, unsupported_format
@@ -517,7 +517,7 @@ def plan(
     found: list[Found],
     out_dir: Path,
     suffix: str,
-    level: float | str | None,
+    level: float | str | Sequence[float | str] | None,
     rules: list[Rule] | None = None,
     skip_existing: bool = False,
     force: bool = False,
@@ -535,7 +535,11 @@ def plan(
     ``out_dir``: a relative path that would (``..`` parts, an absolute path, a
     link out of it) gives way to the input's own name, at the top of
     ``out_dir``; a name still taken gets a number (``x-2.ply``).
+
+    Several levels give each file one job per level, ``NAME_levelL.ply`` (a
+    mapping entry's level overrides them with its one).
     """
+    levels = list(level) if isinstance(level, list | tuple) else [level]
     out_dir = Path(out_dir)
     base = out_dir.resolve()
     relatives = [_inside(base, f.relative) or _fallback_name(f) for f in found]
@@ -550,7 +554,6 @@ def plan(
         taken.add(name)
         output = out_dir / name
         rule = next((r for r in rules or [] if r.matches(f.relative)), None)
-        job_level = rule.level if rule and rule.level is not None else level
         reader = READERS.by_suffix(format_suffix(f.spec))
         is_raw = reader is not None and reader[0] == "raw"
         job_options = {
@@ -558,32 +561,55 @@ def plan(
             **((raw_options or {}) if is_raw else {}),
             **(rule.options if rule else {}),
         }
-        if job_level is None:
-            done.append(
-                Outcome(
-                    f.spec,
-                    str(output),
-                    "failed",
-                    message=f"{f.spec}: no level; give --level or a mapping entry",
-                )
-            )
-            continue
-        if output.exists() and skip_existing:
-            done.append(Outcome(f.spec, str(output), "skipped", message="output exists"))
-            continue
-        if output.exists() and not force:
-            done.append(
-                Outcome(
-                    f.spec,
-                    str(output),
-                    "failed",
-                    message=f"{output}: already exists; pass --force or --skip-existing",
-                )
-            )
-            continue
-        estimate = MEMORY_FACTOR * f.size + MEMORY_BASE
-        jobs.append(Job(f.spec, str(output), job_level, job_options, estimate))
+        if rule and rule.level is not None:
+            file_levels = [(rule.level, output)]
+        elif len(levels) > 1:
+            named = level_outputs(name, levels)
+            file_levels = [(lv, out_dir / path) for lv, path in zip(levels, named, strict=True)]
+        else:
+            file_levels = [(levels[0], output)]
+        for job_level, output in file_levels:
+            _add_job(f, output, job_level, job_options, jobs, done, skip_existing, force)
     return jobs, done
+
+
+def _add_job(
+    f: Found,
+    output: Path,
+    job_level: float | str | None,
+    job_options: dict,
+    jobs: list[Job],
+    done: list[Outcome],
+    skip_existing: bool,
+    force: bool,
+) -> None:
+    """The job converting ``f`` at ``job_level`` into ``output``, or the outcome
+    saying why there is none (no level, output there)."""
+    if job_level is None:
+        done.append(
+            Outcome(
+                f.spec,
+                str(output),
+                "failed",
+                message=f"{f.spec}: no level; give --level or a mapping entry",
+            )
+        )
+        return
+    if output.exists() and skip_existing:
+        done.append(Outcome(f.spec, str(output), "skipped", message="output exists"))
+        return
+    if output.exists() and not force:
+        done.append(
+            Outcome(
+                f.spec,
+                str(output),
+                "failed",
+                message=f"{output}: already exists; pass --force or --skip-existing",
+            )
+        )
+        return
+    estimate = MEMORY_FACTOR * f.size + MEMORY_BASE
+    jobs.append(Job(f.spec, str(output), job_level, job_options, estimate))
 
 
 def _output_name(relative: Path, suffix: str) -> Path:

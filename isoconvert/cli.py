@@ -870,7 +870,13 @@ def batch(
     inputs: Annotated[list[str], typer.Argument(help="Files, folders or globs of volumes.")],
     out_dir: Annotated[Path, typer.Option("-o", "--output", help="Folder for the meshes.")],
     level: Annotated[
-        str | None, typer.Option("--level", "-l", help="Isovalue for all, or 'auto' (Otsu).")
+        list[str] | None,
+        typer.Option(
+            "--level",
+            "-l",
+            help="Isovalue for all, or 'auto' (Otsu); several --level write one mesh each "
+            "(NAME_levelL.ply).",
+        ),
     ] = None,
     levels: Annotated[
         Path | None,
@@ -972,7 +978,7 @@ def batch(
         from .preview import require_renderer
 
         require_renderer()
-    if level is None and levels is None:
+    if not level and levels is None:
         raise VolumeError("batch needs --level (a number or auto) or --levels FILE")
     if out_dir.exists() and not out_dir.is_dir():
         raise VolumeError(f"{out_dir}: exists and is not a folder; choose another -o")
@@ -986,7 +992,12 @@ def batch(
         inputs, recursive=recursive, exclude=out_dir, images=images or method == "squares"
     )
     batching.check_found(inputs, found, skipped)
-    numeric_level = None if level is None else (level if level == "auto" else _level(level))
+    numeric_level = None
+    if level:
+        from .convert import level_outputs
+
+        numeric_level = [lv if lv == "auto" else _level(lv) for lv in level]
+        level_outputs(out_dir / "x", numeric_level)  # the same level twice is an error
     common = {"spacing": _numbers(spacing, "--spacing")} if spacing else {}
     if allow_outside_data:
         common["allow_outside_data"] = True

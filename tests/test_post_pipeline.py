@@ -242,3 +242,19 @@ def test_several_levels_from_the_command_line(tmp_path, capsys):
 def test_post_steps_refuse_contours():
     with pytest.raises(IsoconvertError, match="squares gives contours"):
         convert(SAMPLES / "figure_2_4.nrrd", "unused.svg", 5.5, smooth=10)
+
+
+def test_batch_writes_one_mesh_per_level_like_convert(tmp_path, capsys):
+    src = SAMPLES / "sphere.nrrd"
+    out = tmp_path / "out"
+    args = ["batch", str(src), "-o", str(out), "-l", "100.5", "-l", "200.5", "--smooth", "5"]
+    assert main([*args, "-q"]) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["sphere_level100.5.ply", "sphere_level200.5.ply"]
+    for level in (100.5, 200.5):
+        single = convert(src, tmp_path / f"one{level}.ply", level, smooth=5).mesh
+        read = read_mesh(out / f"sphere_level{level:g}.ply")
+        assert np.array_equal(read.cells, single.cells)
+        assert np.allclose(read.vertices, single.vertices, atol=1e-4)
+    assert main(["batch", str(src), "-o", str(tmp_path / "o2"), "-l", "1", "-l", "1"]) == 1
+    assert "given twice" in capsys.readouterr().err
