@@ -149,27 +149,8 @@ def vertex_normals(
     flat = ~normals.any(axis=1)
     flat |= np.isnan(normals[:, 0])
     if flat.any():
-        normals[flat] = _face_normals_at(mesh, flat)
+        normals[flat] = mesh.vertex_normals()[flat]
     return normals
-
-
-def _face_normals_at(mesh: Mesh, wanted: np.ndarray) -> np.ndarray:
-    """Area-weighted mean triangle normals ``(n, 3)`` at the vertices ``wanted``
-    (a (V,) mask); zero where no triangle of positive area touches one."""
-    cells = np.asarray(mesh.cells)
-    touching = wanted[cells].any(axis=1)
-    tri = cells[touching]
-    v = mesh.vertices
-    cross = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])
-    total = np.zeros((len(v), 3))
-    for corner in range(3):
-        for axis in range(3):
-            total[:, axis] += np.bincount(tri[:, corner], cross[:, axis], minlength=len(v))
-    picked = total[wanted]
-    length = np.linalg.norm(picked, axis=1)
-    nonzero = length > 0
-    picked[nonzero] /= length[nonzero, np.newaxis]
-    return picked
 
 
 def vertex_values(mesh: Mesh, volume: Volume, *, nan_as: float | None = None) -> np.ndarray:

@@ -315,29 +315,8 @@ def _offscreen_window(opengl, core):
 
 
 def vertex_normals(mesh: Mesh) -> np.ndarray:
-    """Unit area-weighted vertex normals of a triangle mesh.
-
-    Parameters
-    ----------
-    mesh : Mesh
-        ``vertices (V, 3)``, ``cells (C, 3)``.
-
-    Returns
-    -------
-    (V, 3) float32
-        Zero for vertices in no triangle of non-zero area.
-    """
-    v = np.asarray(mesh.vertices, dtype=np.float64)
-    t = np.asarray(mesh.cells)
-    # |cross| is twice the area: summing unnormalized cross products weights by area
-    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-    flat = t.reshape(-1)
-    out = np.empty((len(v), 3), dtype=np.float64)
-    for a in range(3):  # bincount is much faster than np.add.at
-        out[:, a] = np.bincount(flat, weights=np.repeat(n[:, a], 3), minlength=len(v))
-    length = np.linalg.norm(out, axis=1)
-    out[length > 0] /= length[length > 0, None]
-    return out.astype(np.float32)
+    """(V, 3) float32 unit area-weighted vertex normals (:meth:`Mesh.vertex_normals`)."""
+    return mesh.vertex_normals().astype(np.float32)
 
 
 def _render_surface(
