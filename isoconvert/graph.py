@@ -215,3 +215,41 @@ def edge_table(triangles: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.n
     edges, counts = table["all_edges"], table["all_counts"]
     order = np.lexsort((edges[:, 1], edges[:, 0]))  # the kernel lists them by lower end only
     return edges[order], counts[order]
+
+
+#: Pairs (of a row and one of its items) made at once by :func:`ragged_pairs`:
+#: bounds the memory of the temporaries built from them.
+PAIR_CHUNK = 4_000_000
+
+
+def ragged_pairs(counts: np.ndarray, chunk: int = PAIR_CHUNK):
+    """Enumerate the (row, k-th item) pairs of ragged rows, whole rows at a time.
+
+    Row ``r`` has ``counts[r]`` items; the pairs come in chunks of about
+    ``chunk`` (more only when a single row has more).
+
+    Parameters
+    ----------
+    counts : (R,) int64
+    chunk : int
+
+    Yields
+    ------
+    first, stop : int
+        The rows ``first <= r < stop`` of this chunk.
+    row : (P,) int64
+        The row of each pair.
+    k : (P,) int64
+        Its rank within its row (0 .. counts[row] - 1).
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    if not len(counts):
+        return
+    ends = np.cumsum(counts)
+    bounds = np.searchsorted(ends, np.arange(0, ends[-1], chunk), side="right")
+    bounds = np.unique(np.concatenate([[0], bounds, [len(counts)]]))
+    for first, stop in zip(bounds[:-1], bounds[1:], strict=True):
+        c = counts[first:stop]
+        row = np.repeat(np.arange(first, stop), c)
+        k = np.arange(len(row)) - np.repeat(np.cumsum(c) - c, c)
+        yield int(first), int(stop), row, k

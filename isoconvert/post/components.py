@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import IsoconvertError
-from ..graph import connected_components
+from ..graph import connected_components, ragged_pairs
 from ..mesh import Mesh
 
 #: Ray directions of the inside test: generic (no grid axis, no diagonal), so a ray
@@ -25,8 +25,6 @@ _RAYS = np.array(
         [0.3420201, -0.1736482, 0.9235429],
     ]
 )
-#: (point, triangle) pairs tested at once in the inside test (bounds memory).
-_PAIR_CHUNK = 4_000_000
 
 
 def _labels(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -265,13 +263,8 @@ def _inside(points: np.ndarray, comps: np.ndarray, tri_comp: np.ndarray, corners
     starts = np.cumsum(sizes) - sizes
     counts = sizes[comps]
     votes = np.zeros(len(points), dtype=np.int64)
-    ends = np.cumsum(counts)
-    bounds = np.searchsorted(ends, np.arange(0, ends[-1], _PAIR_CHUNK), side="right")
-    bounds = np.unique(np.concatenate([[0], bounds, [len(points)]]))
-    for q0, q1 in zip(bounds[:-1], bounds[1:], strict=True):
+    for q0, q1, pid, offset in ragged_pairs(counts):
         c = counts[q0:q1]
-        pid = np.repeat(np.arange(q0, q1), c)
-        offset = np.arange(len(pid)) - np.repeat(np.cumsum(c) - c, c)
         t = order[np.repeat(starts[comps[q0:q1]], c) + offset]
         for ray in _RAYS:
             hits = _ray_hits(points[pid], ray, corners[t])

@@ -26,13 +26,12 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import IsoconvertError
+from ..graph import ragged_pairs
 from ..mesh import Mesh
 
 _NEEDS = "decimation needs meshoptimizer: pip install isoconvert[simplify]"
 #: Attempts with a tightened library limit before giving the input back unchanged.
 _MAX_ATTEMPTS = 8
-#: Point-triangle pairs measured at once (bounds the memory of the distance check).
-_PAIR_CHUNK = 4_000_000
 
 
 def _meshoptimizer():
@@ -252,14 +251,8 @@ def _max_vertex_distance(points: np.ndarray, cells: np.ndarray, radius: float) -
     if (n_pairs == 0).any():
         return float("inf")
     best = np.full(len(query), np.inf)
-    ends = np.cumsum(n_pairs)
-    # chunks of whole points, each with at most about _PAIR_CHUNK pairs
-    bounds = np.searchsorted(ends, np.arange(0, ends[-1], _PAIR_CHUNK), side="right")
-    bounds = np.unique(np.concatenate([[0], bounds, [len(query)]]))
-    for p0, p1 in zip(bounds[:-1], bounds[1:], strict=True):
+    for p0, p1, pid, offset in ragged_pairs(n_pairs):  # whole points, chunks of pairs
         counts = n_pairs[p0:p1]
-        pid = np.repeat(np.arange(p0, p1), counts)
-        offset = np.arange(len(pid)) - np.repeat(np.cumsum(counts) - counts, counts)
         t = tri[np.repeat(start[p0:p1], counts) + offset]
         d2 = _point_triangle_sq(query[pid], a[t], b[t], c[t])
         # pairs are grouped by point and every point has one: a segmented minimum
