@@ -255,11 +255,7 @@ def _series_volume(path: Path, items: list, notes: list[str]) -> Volume:
     dtype, slopes = _value_type(items)
     grid = DicomSeriesGrid(path, [f for f, _ in items], (cols, rows, len(items)), dtype, slopes)
     if any(s != (1.0, 0.0) for s in slopes):
-        s, b = slopes[0]
-        sign = "-" if b < 0 else "+"
-        notes.append(
-            f"values rescaled: stored * {s:g} {sign} {abs(b):g} (RescaleSlope/RescaleIntercept)"
-        )
+        notes.append(_rescale_note(*slopes[0]))
     return Volume(
         grid,
         spacing=(float(spacing_yx[1]), float(spacing_yx[0]), dz),
@@ -403,11 +399,7 @@ def _multiframe_volume(path: Path, f: Path, ds, notes: list[str]) -> Volume:
     if len(set(per_z)) > 1:
         notes.append("values rescaled frame by frame (RescaleSlope/RescaleIntercept)")
     elif per_z[0] != (1.0, 0.0):
-        s, b = per_z[0]
-        sign = "-" if b < 0 else "+"
-        notes.append(
-            f"values rescaled: stored * {s:g} {sign} {abs(b):g} (RescaleSlope/RescaleIntercept)"
-        )
+        notes.append(_rescale_note(*per_z[0]))
     return Volume(
         grid,
         spacing=(float(spacings[0, 1]), float(spacings[0, 0]), dz),
@@ -679,3 +671,12 @@ class DicomFramesGrid(LazyGrid):
             return list(iter_pixels(self.file, indices=indices))
         except Exception as exc:
             raise _decode_error(self.file, None, exc) from None
+
+
+def _rescale_note(slope: float, intercept: float) -> str:
+    """The note saying how stored values became the volume's (HU for CT)."""
+    sign = "-" if intercept < 0 else "+"
+    return (
+        f"values rescaled: stored * {slope:g} {sign} {abs(intercept):g} "
+        "(RescaleSlope/RescaleIntercept)"
+    )
