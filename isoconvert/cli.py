@@ -212,6 +212,13 @@ MinSizeOpt = Annotated[
     int | None,
     typer.Option(help="Drop components of fewer than N triangles.", rich_help_panel=_POST),
 ]
+MinVolumeOpt = Annotated[
+    float | None,
+    typer.Option(
+        help="Drop closed components enclosing less than V (world units cubed).",
+        rich_help_panel=_POST,
+    ),
+]
 FillCavitiesOpt = Annotated[
     bool,
     _flag(
@@ -514,6 +521,7 @@ def convert(
     largest: LargestOpt = False,
     keep: KeepOpt = None,
     min_size: MinSizeOpt = None,
+    min_volume: MinVolumeOpt = None,
     fill_cavities: FillCavitiesOpt = False,
     smooth: SmoothOpt = None,
     smooth_method: SmoothMethodOpt = "sinc",
@@ -585,6 +593,7 @@ def convert(
         largest,
         keep,
         min_size,
+        min_volume,
         fill_cavities,
         smooth,
         smooth_method,
@@ -716,6 +725,7 @@ def _post_options(
     largest,
     keep,
     min_size,
+    min_volume,
     fill_cavities,
     smooth,
     smooth_method,
@@ -732,6 +742,7 @@ def _post_options(
         close=close,
         keep=1 if largest else keep,
         min_size=min_size,
+        min_volume=min_volume,
         fill_cavities=fill_cavities,
         smooth=smooth or 0,
         smooth_method=smooth_method,
@@ -936,6 +947,7 @@ def batch(
     largest: LargestOpt = False,
     keep: KeepOpt = None,
     min_size: MinSizeOpt = None,
+    min_volume: MinVolumeOpt = None,
     fill_cavities: FillCavitiesOpt = False,
     smooth: SmoothOpt = None,
     smooth_method: SmoothMethodOpt = "sinc",
@@ -966,6 +978,7 @@ def batch(
         largest,
         keep,
         min_size,
+        min_volume,
         fill_cavities,
         smooth,
         smooth_method,

@@ -173,6 +173,11 @@ def test_largest_and_min_size_from_the_command_line(tmp_path):
     assert read_mesh(out).n_cells == sizes[1]
     assert main([*args, "--keep", "2"]) == 0
     assert read_mesh(out).n_cells == whole.n_cells
+    # the small ball encloses about 113, the big one about 1437 cubic units
+    assert main([*args, "--min-volume", "500"]) == 0
+    assert read_mesh(out).n_cells == sizes[1]
+    assert main([*args, "--min-volume", "50"]) == 0
+    assert read_mesh(out).n_cells == whole.n_cells
 
 
 def test_smooth_and_decimate_from_the_command_line(tmp_path):
@@ -190,7 +195,8 @@ def test_smooth_and_decimate_from_the_command_line(tmp_path):
 
 @pytest.mark.parametrize("bad", [["--decimate", "1.5"], ["--keep", "0"], ["--smooth", "-2"],
                                  ["--smooth", "5", "--smooth-method", "gauss"],
-                                 ["--largest", "--keep", "2"], ["--max-error", "0"]])  # fmt: skip
+                                 ["--largest", "--keep", "2"], ["--max-error", "0"],
+                                 ["--min-volume", "-1"]])  # fmt: skip
 def test_bad_post_options_are_one_line_errors_before_the_work(tmp_path, capsys, bad):
     out = tmp_path / "s.ply"
     code = main(["convert", str(SAMPLES / "sphere.nrrd"), "-o", str(out), "-l", "127.5", *bad])

@@ -29,6 +29,9 @@ class PostOptions:
         Keep the ``keep`` largest components (by triangles); ``--largest`` is 1.
     min_size : int or None
         Drop components of fewer triangles.
+    min_volume : float or None
+        Drop closed components enclosing less (world units cubed; open ones,
+        which enclose none, are kept).
     fill_cavities : bool
         Drop closed components inside another closed component.
     smooth : int
@@ -47,6 +50,7 @@ class PostOptions:
     close: bool = False
     keep: int | None = None
     min_size: int | None = None
+    min_volume: float | None = None
     fill_cavities: bool = False
     smooth: int = 0
     smooth_method: str = "sinc"
@@ -59,6 +63,10 @@ class PostOptions:
             raise IsoconvertError(f"--keep takes a number of components >= 1, got {self.keep}")
         if self.min_size is not None and self.min_size < 1:
             raise IsoconvertError(f"--min-size takes a triangle count >= 1, got {self.min_size}")
+        if self.min_volume is not None and not self.min_volume > 0:
+            raise IsoconvertError(
+                f"--min-volume takes a volume in world units cubed > 0, got {self.min_volume}"
+            )
         if self.smooth_method not in METHODS:
             raise IsoconvertError(
                 f"unknown --smooth-method {self.smooth_method!r}; choose from: {', '.join(METHODS)}"
@@ -85,6 +93,8 @@ class PostOptions:
             steps.append("fill-cavities")
         if self.min_size is not None:
             steps.append(f"min-size {self.min_size}")
+        if self.min_volume is not None:
+            steps.append(f"min-volume {self.min_volume:g}")
         if self.keep is not None:
             steps.append("largest" if self.keep == 1 else f"keep {self.keep}")
         if self.smooth:
@@ -141,13 +151,14 @@ def post_process(
             flip=flip,
             nan_as=nan_as,
         )
-    if options.fill_cavities or options.min_size is not None or options.keep is not None:
+    small = options.min_size is not None or options.min_volume is not None
+    if options.fill_cavities or small or options.keep is not None:
         from .components import drop_small, fill_cavities, keep_largest
 
         if options.fill_cavities:
             mesh = fill_cavities(mesh)
-        if options.min_size is not None:
-            mesh = drop_small(mesh, min_triangles=options.min_size)
+        if small:
+            mesh = drop_small(mesh, min_triangles=options.min_size, min_volume=options.min_volume)
         if options.keep is not None:
             mesh = keep_largest(mesh, options.keep)
     if options.smooth:
