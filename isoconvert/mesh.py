@@ -83,16 +83,14 @@ class Mesh:
     def vertex_normals(self) -> np.ndarray:
         """(V, 3) float64 unit area-weighted normals of the triangles around each
         vertex; zero for vertices in no triangle of non-zero area."""
-        v = np.asarray(self.vertices, dtype=np.float64)
-        t = np.asarray(self.cells)
-        # |cross| is twice the area: summing unnormalized cross products weights by area
-        n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-        flat = t.reshape(-1)
-        out = np.empty((len(v), 3), dtype=np.float64)
-        for a in range(3):  # bincount is much faster than np.add.at
-            out[:, a] = np.bincount(flat, weights=np.repeat(n[:, a], 3), minlength=len(v))
-        length = np.linalg.norm(out, axis=1)
-        out[length > 0] /= length[length > 0, None]
+        from . import _native
+
+        out = np.empty((len(self.vertices), 3), dtype=np.float64)
+        _native.vertex_normals(
+            np.ascontiguousarray(self.vertices, dtype=np.float64),
+            np.ascontiguousarray(self.cells, dtype=np.int64),
+            out,
+        )
         return out
 
     def area(self) -> float:

@@ -389,6 +389,7 @@ def _render_surface(
     window.Render()
     grab = rendering.vtkWindowToImageFilter()
     grab.SetInput(window)
+    grab.ShouldRerenderOff()  # the window was just rendered; a second render costs as much
     grab.ReadFrontBufferOff()
     grab.Update()
     image = grab.GetOutput()
