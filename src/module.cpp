@@ -22,6 +22,7 @@ void bind_tetra_squares(nb::module_ &m);  // more.cpp
 void bind_report(nb::module_ &m);         // report.cpp
 void bind_sample(nb::module_ &m);         // sample.cpp
 void bind_smooth(nb::module_ &m);         // smooth.cpp
+void bind_labels(nb::module_ &m);         // labels.cpp
 void bind_normals(nb::module_ &m);        // normals.cpp
 
 namespace {
@@ -118,5 +119,6 @@ NB_MODULE(_native, m) {
   bind_report(m);
   bind_sample(m);
   bind_smooth(m);
+  bind_labels(m);
   bind_normals(m);
 }

@@ -199,6 +199,77 @@ def test_edge_and_corner_contacts_stay_manifold():
     assert check_mesh(smoothed[1]).checks["manifold"]
 
 
+# --- the compiled kernels: layouts, types, threads ----------------------------------------
+
+
+def random_labels(shape=(13, 11, 9), values=4, seed=1) -> np.ndarray:
+    """Random labels: every kind of edge and corner contact, and junctions."""
+    return np.random.default_rng(seed).integers(0, values, size=shape).astype(np.uint8)
+
+
+def as_arrays(result: LabelMeshes) -> dict:
+    out = {
+        "v": result.combined.vertices,
+        "c": result.combined.cells,
+        "b": result.boundary_labels,
+        "d": result.dual_cells,
+    }
+    for label in result.labels:
+        out[f"{label}c"] = result[label].cells
+        out[f"{label}vm"] = result.vertex_map[label]
+        out[f"{label}fm"] = result.face_map[label]
+    return out
+
+
+def test_output_does_not_depend_on_threads(monkeypatch):
+    volume = Volume(random_labels((24, 20, 18)), spacing=(1.0, 2.0, 0.5))
+    results = []
+    for threads in ("1", "2"):
+        monkeypatch.setenv("ISOCONVERT_THREADS", threads)
+        results.append(as_arrays(label_surfaces(volume, smoothing=5)))
+    assert results[0].keys() == results[1].keys()
+    for name in results[0]:
+        assert np.array_equal(results[0][name], results[1][name]), name
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int8, np.uint16, np.int32, np.float32, np.int64])
+def test_sample_types_and_layouts_agree(dtype):
+    data = random_labels((9, 8, 7))
+    expected = as_arrays(label_surfaces(Volume(data), smoothing=3))
+    for layout in (data.astype(dtype), np.asfortranarray(data.astype(dtype))):
+        got = as_arrays(label_surfaces(Volume(layout), smoothing=3))
+        for name in expected:
+            assert np.array_equal(expected[name], got[name]), (dtype, name)
+
+
+def test_single_sample_thick_axes_are_closed_outward():
+    # the two sides of an axis of one sample are different faces (the numpy
+    # version took both for low sides, turning the high side's quads inwards)
+    for shape in [(1, 1, 4), (3, 1, 5), (1, 4, 1)]:
+        data = random_labels(shape, values=2, seed=4)
+        data[0, 0, 0] = 2  # a second label next to the first
+        result = label_surfaces(Volume(data), smoothing=0)
+        for label in result.labels:
+            mesh = result[label]
+            assert closed_by_index(mesh.cells), (shape, label)
+            assert mesh.signed_volume() == pytest.approx(np.count_nonzero(data == label))
+
+
+def test_wide_label_values_and_a_background_outside_the_type():
+    data = np.zeros((6, 5, 4), dtype=np.int32)
+    data[1:3, 1:4, 1:3] = 2**30  # labels spread wider than a lookup table
+    data[3:5, 1:4, 1:3] = -7
+    result = label_surfaces(Volume(data), smoothing=0)
+    assert result.labels == [-7, 2**30]
+    for label in result.labels:
+        assert result[label].signed_volume() == pytest.approx(np.count_nonzero(data == label))
+    # background -1 for uint8 samples: every value present is a label, 0 included
+    small = random_labels((5, 4, 3), values=2)
+    result = label_surfaces(Volume(small), background=-1, smoothing=0)
+    assert result.labels == [0, 1]
+    assert result[0].signed_volume() + result[1].signed_volume() == pytest.approx(small.size)
+
+
 # --- errors --------------------------------------------------------------------------------
 
 

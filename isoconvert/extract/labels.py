@@ -49,6 +49,19 @@ junction of three or more labels keep sharp junction curves as in Frisken 2022:
 they average only their neighbours that are on a junction too, and stay fixed
 where junction curves meet (not exactly two such neighbours). All of it runs in
 index space (the average and the box commute with the index-to-world map).
+
+Kernels
+-------
+The work runs in compiled kernels (``src/labels.cpp``): one pass for the labels
+present (a table of the values for 8- and 16-bit samples, no sort of the
+volume), one sweep over the dual cells that finds each cell's sheets from its
+2x2x2 block of samples (every vertex is one), then the quads, the smoothing and
+the per-label meshes. The arrays are those of the numpy formulation they
+replaced, bit for bit and in the same order (quads in ``np.nonzero`` order per
+axis: interior faces, low side, high side; vertices by their first quad corner),
+whatever the number of threads; except that an axis of a single sample now has
+its high side's quads facing out of the labels as they should (the numpy
+version took both sides of such an axis for low sides).
 """
 
 from __future__ import annotations
@@ -58,19 +71,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import _native
 from ..errors import LevelError, VolumeError
-from ..graph import connected_components
 from ..mesh import Mesh
+from ..threads import kernel_threads
 from ..volume import Volume
 from .placement import mesh_info, reversed_orientation
-
-#: Corners of a quad in its plane, as offsets along its two in-plane axes (u, v)
-#: = the axes that follow the quad's axis cyclically: counter-clockwise seen from
-#: the positive end of the quad's axis, so the right-hand normal is +axis.
-_CORNERS = np.array([(0, 0), (1, 0), (1, 1), (0, 1)], dtype=np.int64)
-#: The quad's four edges as (low corner, high corner, along u (0) or v (1)); the
-#: low corner is the dual cell the dual edge starts from.
-_EDGES = ((0, 1, 0), (3, 2, 0), (0, 3, 1), (1, 2, 1))
+from .prepare import kernel_type
 
 
 @dataclass(frozen=True)
@@ -200,29 +207,38 @@ def label_surfaces(
         Nothing but background in the volume.
     """
     options = _smoothing_options(smoothing)
-    data = _label_samples(volume)
+    samples = _label_samples(volume)
     background = _whole(background, "--background", volume.source)
-    wanted, complete = _wanted_labels(data, labels, background, volume.source)
+    threads = kernel_threads()
+    vmin, vmax, present = _present_labels(samples, volume.source, threads)
+    wanted, _ = _wanted_labels(present, labels, background, volume.source)
+    samples = _fit_background(samples, background)
 
-    quads = _boundary_quads(data, wanted, background, complete)
-    if len(quads.inside) == 0:
+    # a left-handed index-to-world map mirrors the surface: the kernel writes every quad reversed
+    reverse = reversed_orientation(volume, False)
+    positions, dual_cells, corners, pairs, sides, split = _native.label_net(
+        samples,
+        wanted,
+        float(background),
+        vmin,
+        vmax,
+        int(options.iterations),
+        float(options.relaxation),
+        float(options.constraint),
+        bool(reverse),
+        threads,
+    )
+    if len(corners) == 0:
         raise LevelError(f"{volume.source}: no label surface (every sample is background)")
-    net = _surface_net(quads, volume.shape)
-    if net.split and on_status:
+    if split and on_status:
         on_status(
-            f"labels: {net.split} vertices split where a label touches itself only along "
+            f"labels: {split} vertices split where a label touches itself only along "
             "an edge or at a corner (kept manifold)"
         )
-    positions = _smooth(net, quads, options)
     vertices = volume.index_to_world(positions)
-
-    corners = net.quads
-    # a left-handed index-to-world map mirrors the surface: write every quad reversed
-    reverse = reversed_orientation(volume, False)
-    flip = (quads.inside == quads.hi_value) != reverse
-    corners[flip] = corners[flip][:, ::-1]
-    cells = _triangulate(corners, vertices)
-    pairs = np.repeat(np.column_stack([quads.inside, quads.outside]), 2, axis=0)
+    cells, faces, face_offsets, used, used_offsets, local, label_vertices = _native.label_meshes(
+        corners, vertices, sides, len(wanted), threads
+    )
 
     info = mesh_info(volume, "labels", _level_text(wanted), flip=False)
     info["labels"] = [int(v) for v in wanted]
@@ -232,8 +248,16 @@ def label_surfaces(
         "constraint": options.constraint,
     }
     combined = Mesh(vertices, cells, None, info)
-    result = LabelMeshes({}, combined, pairs, dual_cells=net.dual_cells, split_vertices=net.split)
-    _split_by_label(result, volume, wanted, options)
+    result = LabelMeshes({}, combined, pairs, dual_cells=dual_cells, split_vertices=int(split))
+    for index, label in enumerate(wanted.tolist()):
+        f0, f1 = face_offsets[index], face_offsets[index + 1]
+        v0, v1 = used_offsets[index], used_offsets[index + 1]
+        label_info = mesh_info(volume, "labels", float(label), flip=False)
+        label_info["label"] = int(label)
+        label_info["smoothing"] = dict(info["smoothing"])
+        result.meshes[label] = Mesh(label_vertices[v0:v1], local[f0:f1], None, label_info)
+        result.vertex_map[label] = used[v0:v1]
+        result.face_map[label] = faces[f0:f1]
     return result
 
 
@@ -253,31 +277,60 @@ def _smoothing_options(smoothing: SmoothingOptions | int | None) -> SmoothingOpt
 
 
 def _label_samples(volume: Volume) -> np.ndarray:
-    """The (X, Y, Z) samples of a label volume, checked (no copy)."""
+    """The samples of a label volume as the kernels take them: (Z, Y, X), C-contiguous,
+    one of the kernels' types (a view when they already are). Float samples are
+    compared as they are (exact for whole numbers, which the label scan checks)."""
     if volume.ndim != 3:
         raise VolumeError(
             f"{volume.source}: label surfaces need a 3D volume, got shape {volume.shape}; "
             "use a 3D label volume (a stack of slices)"
         )
     data = volume.data
-    if data.dtype == bool:
-        return data.view(np.uint8)
-    if np.issubdtype(data.dtype, np.integer):
-        return data
-    if not np.issubdtype(data.dtype, np.floating):
-        raise VolumeError(f"{volume.source}: samples of type {data.dtype} are not labels")
-    # Float samples are compared as they are (exact for whole numbers), so no
-    # integer copy is made; they must all be whole numbers, though.
-    bad = 0
-    for k in range(0, data.shape[2], 16):
-        slab = data[:, :, k : k + 16]
-        bad += int(np.count_nonzero(~np.isfinite(slab) | (slab != np.round(slab))))
+    if data.dtype != bool and not np.issubdtype(data.dtype, np.integer):
+        if not np.issubdtype(data.dtype, np.floating):
+            raise VolumeError(f"{volume.source}: samples of type {data.dtype} are not labels")
+        if data.dtype.itemsize < 4:  # float16: no kernel of its own, exact in float32
+            data = data.astype(np.float32)
+    if np.issubdtype(data.dtype, np.integer) and data.dtype.itemsize == 8 and data.size:
+        # 64-bit labels: as int32 when they fit (exact, half the memory), else float64
+        lo, hi = int(data.min()), int(data.max())
+        if -(2**31) <= lo and hi < 2**31:
+            data = data.astype(np.int32)
+    return kernel_type(data.T, volume.source)
+
+
+def _present_labels(
+    samples: np.ndarray, source: str, threads: int
+) -> tuple[float, float, np.ndarray]:
+    """(min, max, sorted (P,) int64 values present), in one compiled pass: a table of
+    the values for 8- and 16-bit samples or a narrow range, a sort only otherwise."""
+    vmin, vmax, bad, present = _native.label_presence(samples, threads)
     if bad:
         raise VolumeError(
-            f"{volume.source}: {bad} samples are not whole numbers, so this is not a label "
-            "volume; use an isosurface method (cubes) or round the labels first"
+            f"{source}: {bad} samples are not whole numbers (within +-2**53), so this is not "
+            "a label volume; use an isosurface method (cubes) or round the labels first"
         )
-    return data
+    if present is None:
+        present = np.unique(samples)
+    return float(vmin), float(vmax), np.asarray(present).astype(np.int64)
+
+
+def _fit_background(samples: np.ndarray, background: int) -> np.ndarray:
+    """The samples in a type that holds ``background`` (the value around the grid):
+    a copy in a wider type in the rare case theirs does not."""
+    dtype = samples.dtype
+    if np.issubdtype(dtype, np.integer):
+        info = np.iinfo(dtype)
+        if info.min <= background <= info.max:
+            return samples
+        wide = np.int32 if -(2**31) <= background < 2**31 and dtype.itemsize < 4 else np.float64
+    else:
+        if float(dtype.type(background)) == background:
+            return samples
+        wide = np.float64
+    if wide == np.float64 and abs(background) > 2**53:
+        raise VolumeError(f"background {background} is beyond +-2**53, which labels cannot be")
+    return samples.astype(wide)
 
 
 def _whole(value: object, name: str, source: str) -> int:
@@ -291,11 +344,10 @@ def _whole(value: object, name: str, source: str) -> int:
 
 
 def _wanted_labels(
-    data: np.ndarray, labels: Iterable[int] | None, background: int, source: str
+    present: np.ndarray, labels: Iterable[int] | None, background: int, source: str
 ) -> tuple[np.ndarray, bool]:
-    """Sorted (L,) int64 label values to extract, checked against those present,
-    and whether they are every label present but the background."""
-    present = np.unique(data).astype(np.int64)  # one sort of the volume (a copy, briefly)
+    """Sorted (L,) int64 label values to extract, checked against the sorted values
+    ``present``, and whether they are every label present but the background."""
     if labels is None:
         wanted = present[present != background]
         if len(wanted) == 0:
@@ -326,346 +378,6 @@ def _level_text(wanted: np.ndarray) -> str:
     """The labels as the ``level`` of file headers: ``1,2,3`` (shortened when long)."""
     text = ",".join(str(v) for v in wanted[:12])
     return text + (f",... ({len(wanted)} labels)" if len(wanted) > 12 else "")
-
-
-# --- faces -------------------------------------------------------------------------------
-
-
-@dataclass
-class _Quads:
-    """The boundary quads: ``Q`` faces between samples, in no particular order.
-
-    Attributes
-    ----------
-    lower : (Q, 3) int64
-        Index of the face's lower sample (-1 along ``axis`` on the grid's low side).
-    axis : (Q,) int64
-        The axis the face is across (its normal's).
-    lo_value, hi_value : (Q,) int64
-        Labels of the lower and upper sample (background outside the grid).
-    inside, outside : (Q,) int64
-        The label the quad's normal points out of, and into.
-    """
-
-    lower: np.ndarray
-    axis: np.ndarray
-    lo_value: np.ndarray
-    hi_value: np.ndarray
-    inside: np.ndarray = None  # type: ignore[assignment]
-    outside: np.ndarray = None  # type: ignore[assignment]
-
-
-def _boundary_quads(
-    data: np.ndarray, wanted: np.ndarray, background: int, complete: bool
-) -> _Quads:
-    """Every face between two samples of different labels, one of them wanted.
-
-    The grid is treated as padded by ``background``: faces on its sides come
-    from its first and last slab along each axis. Peak memory is a boolean
-    array of the volume's size per axis (not kept) plus the faces found.
-    """
-    # With every non-background label wanted, a face is kept when its two labels
-    # differ; otherwise one of them must be wanted, which a mask of the volume says.
-    mask = None if complete else np.isin(data, wanted)
-    parts: list[tuple] = []
-    for a in range(3):
-        n = data.shape[a]
-        lo = _take(data, slice(0, n - 1), a)
-        hi = _take(data, slice(1, n), a)
-        keep = lo != hi
-        if mask is not None:
-            keep &= _take(mask, slice(0, n - 1), a) | _take(mask, slice(1, n), a)
-        idx = np.nonzero(keep)
-        del keep
-        lower = np.column_stack(idx).astype(np.int64)
-        parts.append((lower, a, lo[idx], hi[idx]))
-        # the two sides of the grid: background beyond them
-        for side, at in ((0, -1), (n - 1, n - 1)):
-            slab = _take(data, slice(side, side + 1), a)
-            keep = slab != background
-            if mask is not None:
-                keep &= _take(mask, slice(side, side + 1), a)
-            idx = np.nonzero(keep)
-            lower = np.column_stack(idx).astype(np.int64)
-            lower[:, a] = at
-            values = slab[idx].astype(np.int64)
-            bg = np.full(len(values), background, dtype=np.int64)
-            parts.append((lower, a, values, bg) if side else (lower, a, bg, values))
-    quads = _Quads(
-        np.concatenate([p[0] for p in parts]).reshape(-1, 3),
-        np.concatenate([np.full(len(p[0]), p[1], dtype=np.int64) for p in parts]),
-        np.concatenate([np.asarray(p[2], dtype=np.int64) for p in parts]),
-        np.concatenate([np.asarray(p[3], dtype=np.int64) for p in parts]),
-    )
-    # inside: the wanted side; of two wanted labels the smaller (as VTK's BoundaryLabels)
-    w_lo = np.isin(quads.lo_value, wanted)
-    w_hi = np.isin(quads.hi_value, wanted)
-    lo_inside = w_lo & (~w_hi | (quads.lo_value < quads.hi_value))
-    quads.inside = np.where(lo_inside, quads.lo_value, quads.hi_value)
-    quads.outside = np.where(lo_inside, quads.hi_value, quads.lo_value)
-    return quads
-
-
-def _take(array: np.ndarray, index: slice, axis: int) -> np.ndarray:
-    """``array[..., index, ...]`` along ``axis`` (a view)."""
-    key = [slice(None)] * 3
-    key[axis] = index
-    return array[tuple(key)]
-
-
-# --- the net -------------------------------------------------------------------------
-
-
-@dataclass
-class _Net:
-    """Vertices (dual-cell copies) and quads of the surface net.
-
-    Attributes
-    ----------
-    quads : (Q, 4) int64
-        Vertex indices of each quad's corners, counter-clockwise seen from the
-        positive end of its axis.
-    centers : (V, 3) float64
-        Each vertex's dual-cell centre in index units.
-    dual_cells : (V,) int64
-    edges : (E, 2) int64
-        The quad edges between vertices, once each (the smoothing stencil).
-    split : int
-        Vertices added by splitting.
-    """
-
-    quads: np.ndarray
-    centers: np.ndarray
-    dual_cells: np.ndarray
-    edges: np.ndarray
-    split: int
-
-
-def _surface_net(quads: _Quads, shape: tuple[int, ...]) -> _Net:
-    """Connect the quads through shared dual edges and number the vertices."""
-    dims = np.asarray(shape, dtype=np.int64) + 1  # dual cells per axis (grid padded by one)
-    n = len(quads.axis)
-    a = quads.axis
-    u = (a + 1) % 3
-    v = (a + 2) % 3
-    rows = np.arange(n)
-    # dual cell of corner (0, 0): one past the lower sample along the axis
-    base = quads.lower.copy()
-    base[rows, a] += 1
-    corner_cells = np.empty((n, 4, 3), dtype=np.int64)
-    for c, (ou, ov) in enumerate(_CORNERS):
-        cell = base.copy()
-        cell[rows, u] += ou
-        cell[rows, v] += ov
-        corner_cells[:, c] = cell
-    x, y, z = corner_cells[..., 0], corner_cells[..., 1], corner_cells[..., 2]
-    corner_ids = x + dims[0] * (y + dims[1] * z)
-    del corner_cells
-
-    # The quads' edges on dual edges: a dual edge along axis b from dual cell D
-    # is surrounded by four samples (its "ring"); a quad on it lies in one of the
-    # four gaps of the ring, numbered cyclically 0 (q00|q10), 1 (q10|q11),
-    # 2 (q11|q01), 3 (q01|q00) with q_st the ring sample at offsets (s, t) along
-    # the two other axes (s < t).
-    dual_edge = np.empty((4, n), dtype=np.int64)
-    gap = np.empty((4, n), dtype=np.int64)
-    for e, (c_lo, _, along) in enumerate(_EDGES):
-        b = u if along == 0 else v
-        other = v if along == 0 else u
-        # offset of the quad's samples along `other` within the ring: 1 - (corner's offset)
-        off = 1 - _CORNERS[c_lo, 1 - along]
-        dual_edge[e] = 3 * corner_ids[:, c_lo] + b
-        gap[e] = np.where(a < other, 2 * off, 3 - 2 * off)
-    dual_edge = dual_edge.reshape(-1)
-    gap = gap.reshape(-1)
-    quad_of = np.tile(rows, 4)
-    low_node = np.concatenate([4 * rows + c_lo for c_lo, _, _ in _EDGES])
-    high_node = np.concatenate([4 * rows + c_hi for _, c_hi, _ in _EDGES])
-
-    # Pair, connect, and where both ends of a two-label ring's two edge copies
-    # still end on the same two vertices (the ring's two sheets meet again at
-    # both ends, so one edge would carry four triangles), pair that ring the
-    # other way (separating the outside label instead) and connect again. A few
-    # rounds settle it; what remains is reported by mesh checks.
-    flipped = np.zeros(0, dtype=np.int64)
-    for _ in range(4):
-        group = _pair_quads(dual_edge, gap, quad_of, quads, flipped)
-        key = 2 * dual_edge + group
-        order = np.argsort(key, kind="stable")
-        key_sorted = key[order]
-        first = np.ones(len(order), dtype=bool)
-        first[1:] = key_sorted[1:] != key_sorted[:-1]
-        head = order[np.flatnonzero(first)[np.cumsum(first) - 1]]  # first entry of each run
-        link = ~first
-        u_nodes = np.concatenate([low_node[order[link]], high_node[order[link]]])
-        v_nodes = np.concatenate([low_node[head[link]], high_node[head[link]]])
-        roots = connected_components(4 * n, u_nodes, v_nodes)
-        del u_nodes, v_nodes
-        heads = order[first]
-        ends = np.column_stack([roots[low_node[heads]], roots[high_node[heads]]])
-        ring = key_sorted[first] // 2
-        same = (ring[1:] == ring[:-1]) & (ends[1:] == ends[:-1]).all(axis=1)
-        bad = np.setdiff1d(ring[1:][same], flipped)
-        if len(bad) == 0:
-            break
-        flipped = np.union1d(flipped, bad)
-
-    is_root = roots == np.arange(4 * n)
-    rank = np.cumsum(is_root) - 1
-    vertex_of_node = rank[roots]
-    root_nodes = np.flatnonzero(is_root)
-    dual_cells = corner_ids.reshape(-1)[root_nodes]
-    split = len(root_nodes) - len(np.unique(dual_cells))
-    i = dual_cells % dims[0]
-    j = (dual_cells // dims[0]) % dims[1]
-    k = dual_cells // (dims[0] * dims[1])
-    # the centre of dual cell (i, j, k) is half a voxel below sample (i, j, k)
-    centers = np.column_stack([i, j, k]).astype(np.float64) - 0.5
-    # one stencil edge per run of quads on a dual edge copy
-    edges = np.column_stack([vertex_of_node[low_node[heads]], vertex_of_node[high_node[heads]]])
-    return _Net(vertex_of_node.reshape(n, 4), centers, dual_cells, edges, int(split))
-
-
-def _pair_quads(
-    dual_edge: np.ndarray,
-    gap: np.ndarray,
-    quad_of: np.ndarray,
-    quads: _Quads,
-    flipped: np.ndarray,
-) -> np.ndarray:
-    """(4Q,) 0 or 1: which copy of its dual edge each quad edge is on.
-
-    Only dual edges with four quads (a label diagonal in the ring) get two
-    copies; see the module's notes for the rule. Two-label rings whose dual
-    edge id is in ``flipped`` (sorted) are paired the other way.
-    """
-    group = np.zeros(len(dual_edge), dtype=np.int64)
-    order = np.argsort(dual_edge, kind="stable")
-    sorted_ids = dual_edge[order]
-    starts = np.flatnonzero(np.r_[True, sorted_ids[1:] != sorted_ids[:-1]])
-    counts = np.diff(np.r_[starts, len(sorted_ids)])
-    full = starts[counts == 4]
-    if len(full) == 0:
-        return group
-    entries = order[full[:, None] + np.arange(4)]  # (G, 4) quad edges of each full ring
-    ring_quads = np.empty((len(full), 4), dtype=np.int64)
-    np.put_along_axis(ring_quads, gap[entries], quad_of[entries], axis=1)
-    q0, q2 = ring_quads[:, 0], ring_quads[:, 2]  # gaps q00|q10 and q01|q11 (lower first)
-    s00, s10 = quads.lo_value[q0], quads.hi_value[q0]
-    s01, s11 = quads.lo_value[q2], quads.hi_value[q2]
-    diag_a = s00 == s11
-    diag_b = s10 == s01
-    # 1: pair around q10 and q01 (gaps {0, 1}, {2, 3}), separating q00 from q11;
-    # 2: pair around q00 and q11 (gaps {3, 0}, {1, 2}), separating q10 from q01
-    mode = np.zeros(len(full), dtype=np.int64)
-    mode[diag_a & ~diag_b] = 1
-    mode[diag_b & ~diag_a] = 2
-    both = diag_a & diag_b
-    inside_is_a = quads.inside[q0] == s00
-    # two labels diagonally: the inside one is separated (pairs wrap around its samples)
-    mode[both & inside_is_a] = 2
-    mode[both & ~inside_is_a] = 1
-    if len(flipped):
-        ids = sorted_ids[full]
-        turn = both & np.isin(ids, flipped)
-        mode[turn] = 3 - mode[turn]
-    g = gap[entries]
-    pairing = np.where(mode[:, None] == 1, g // 2, ((g + 1) % 4) // 2)
-    group[entries] = np.where(mode[:, None] == 0, 0, pairing)
-    return group
-
-
-# --- smoothing and triangles ---------------------------------------------------------------
-
-
-def _smooth(net: _Net, quads: _Quads, options: SmoothingOptions) -> np.ndarray:
-    """(V, 3) float64 vertex positions in index units after constrained relaxation."""
-    positions = net.centers.copy()
-    if options.iterations == 0 or len(net.edges) == 0:
-        return positions
-    n_vertices = len(positions)
-    # A vertex is on a junction when its quads do not all separate the same two labels.
-    corners = net.quads.reshape(-1)
-    quad_index = np.repeat(np.arange(len(net.quads)), 4)
-    first_quad = np.empty(n_vertices, dtype=np.int64)
-    first_quad[corners[::-1]] = quad_index[::-1]
-    other = (quads.inside[quad_index] != quads.inside[first_quad[corners]]) | (
-        quads.outside[quad_index] != quads.outside[first_quad[corners]]
-    )
-    junction = np.zeros(n_vertices, dtype=bool)
-    junction[corners[other]] = True
-
-    src = np.concatenate([net.edges[:, 0], net.edges[:, 1]])
-    dst = np.concatenate([net.edges[:, 1], net.edges[:, 0]])
-    # junction vertices follow their junction curve only
-    use = ~junction[src] | junction[dst]
-    src, dst = src[use], dst[use]
-    degree = np.bincount(src, minlength=n_vertices)
-    movable = degree > 0
-    movable &= ~junction | (degree == 2)  # where junction curves meet, stay put
-    moving = np.flatnonzero(movable)
-    keep = movable[src]
-    src, dst = src[keep], dst[keep]
-    degree = degree[moving].astype(np.float64)[:, None]
-    low = net.centers - options.constraint
-    high = net.centers + options.constraint
-    total = np.empty((n_vertices, 3))
-    for _ in range(options.iterations):
-        gathered = positions[dst]
-        for axis in range(3):
-            total[:, axis] = np.bincount(src, weights=gathered[:, axis], minlength=n_vertices)
-        step = total[moving] / degree - positions[moving]
-        positions[moving] += options.relaxation * step
-        np.clip(positions, low, high, out=positions)
-    return positions
-
-
-def _triangulate(corners: np.ndarray, vertices: np.ndarray) -> np.ndarray:
-    """(2Q, 3) int64 triangles of (Q, 4) quads, cut along the shorter diagonal
-    (VTK's default, fewer slivers once smoothed; 0-2 on ties)."""
-    v = vertices
-    d02 = np.einsum("ij,ij->i", *(v[corners[:, 0]] - v[corners[:, 2]],) * 2)
-    d13 = np.einsum("ij,ij->i", *(v[corners[:, 1]] - v[corners[:, 3]],) * 2)
-    cut13 = d13 < d02 * (1 - 1e-9)
-    tri = np.empty((len(corners), 2, 3), dtype=np.int64)
-    tri[:, 0] = corners[:, [0, 1, 2]]
-    tri[:, 1] = corners[:, [0, 2, 3]]
-    tri[cut13, 0] = corners[cut13][:, [0, 1, 3]]
-    tri[cut13, 1] = corners[cut13][:, [1, 2, 3]]
-    return tri.reshape(-1, 3)
-
-
-def _split_by_label(
-    result: LabelMeshes, volume: Volume, wanted: np.ndarray, options: SmoothingOptions
-) -> None:
-    """Fill ``meshes``, ``vertex_map`` and ``face_map``: one sort of the triangles'
-    two sides by label, then a slice per label (no pass over all triangles per label)."""
-    pairs = result.boundary_labels
-    cells = result.combined.cells
-    n = len(cells)
-    side_label = np.concatenate([pairs[:, 0], pairs[:, 1]])
-    side_face = np.concatenate([np.arange(n), np.arange(n)])
-    keep = np.isin(side_label, wanted)
-    side_label, side_face = side_label[keep], side_face[keep]
-    order = np.argsort(side_label, kind="stable")
-    side_label, side_face = side_label[order], side_face[order]
-    bounds = np.searchsorted(side_label, wanted, side="left")
-    ends = np.searchsorted(side_label, wanted, side="right")
-    for label, start, end in zip(wanted.tolist(), bounds, ends, strict=True):
-        faces = side_face[start:end]
-        tris = cells[faces]
-        outside = pairs[faces, 1] == label
-        tris[outside] = tris[outside][:, ::-1]  # normals out of this label
-        used, local = np.unique(tris, return_inverse=True)
-        info = mesh_info(volume, "labels", float(label), flip=False)
-        info["label"] = int(label)
-        info["smoothing"] = dict(result.combined.info["smoothing"])
-        mesh = Mesh(
-            result.combined.vertices[used], local.reshape(-1, 3).astype(np.int64), None, info
-        )
-        result.meshes[int(label)] = mesh
-        result.vertex_map[int(label)] = used
-        result.face_map[int(label)] = faces
 
 
 __all__ = ["LabelMeshes", "SmoothingOptions", "label_surfaces"]
