@@ -72,7 +72,9 @@ def _face_images(volume: Volume):
         data = volume.data
         for axis in range(3):
             for side in (0, shape[axis] - 1):
-                yield axis, side, np.take(data, side, axis=axis)
+                index = [slice(None)] * 3
+                index[axis] = side
+                yield axis, side, data[tuple(index)]  # a view
         return
     # a volume read from its file: one pass over it for the x and y faces
     faces = {
