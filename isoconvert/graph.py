@@ -187,6 +187,32 @@ def merge_positions(
     return MergedPositions(rep, key, int(unique), bool(lexicographic), float(magnitude))
 
 
+def topology(triangles: np.ndarray, n_vertices: int) -> dict:
+    """The compiled topology pass of the mesh report, on vertex indices alone.
+
+    Parameters
+    ----------
+    triangles : (F, 3) int
+        Vertex indices in ``0..n_vertices-1`` (not checked here).
+    n_vertices : int
+
+    Returns
+    -------
+    dict
+        ``all_edges`` (E, 2) and ``all_counts`` (E,): every undirected edge and
+        its multiplicity; ``boundary``, ``non_manifold_edges`` and
+        ``inconsistent`` (N, 2) edges; ``non_manifold_vertices`` (M,) vertices
+        whose triangles form more than one fan; and the rest of the report's
+        table. Triangles that repeat a vertex are skipped.
+    """
+    from . import _native
+
+    itype = index_dtype(n_vertices, 3 * len(triangles))
+    tv = np.ascontiguousarray(triangles, dtype=itype).reshape(-1, 3)
+    key = np.zeros(n_vertices, np.uint64)
+    return _native.topology(tv, n_vertices, key, kernel_threads(), True, wide=itype == np.int64)
+
+
 def edge_table(triangles: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """The undirected edges of triangles and how many triangles use each.
 
@@ -206,12 +232,7 @@ def edge_table(triangles: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.n
         Its multiplicity: 1 on a boundary, 2 inside a manifold, more where it
         is not.
     """
-    from . import _native
-
-    itype = index_dtype(n_vertices, 3 * len(triangles))
-    tv = np.ascontiguousarray(triangles, dtype=itype).reshape(-1, 3)
-    key = np.zeros(n_vertices, np.uint64)
-    table = _native.topology(tv, n_vertices, key, kernel_threads(), True, wide=itype == np.int64)
+    table = topology(triangles, n_vertices)
     edges, counts = table["all_edges"], table["all_counts"]
     order = np.lexsort((edges[:, 1], edges[:, 0]))  # the kernel lists them by lower end only
     return edges[order], counts[order]

@@ -168,7 +168,20 @@ def post_process(
     if options.decimate is not None or options.max_error is not None:
         from .decimate import decimate
 
+        before = mesh.n_cells
         mesh = decimate(mesh, options.decimate, options.max_error)
+        removed = 1.0 - mesh.n_cells / before if before else 0.0
+        asked = options.decimate
+        if on_status and (asked is None and removed == 0 or asked and removed < asked - 0.01):
+            why = (
+                "within --max-error"
+                if asked is None
+                else "keeping the topology (thin walls, small components)"
+            )
+            on_status(
+                f"note: decimation removed {removed:.1%} of the triangles, as many as it could "
+                f"{why}"
+            )
     return mesh
 
 

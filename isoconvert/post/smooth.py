@@ -57,7 +57,7 @@ import numpy as np
 
 from ..errors import IsoconvertError
 from ..geometry import normalized_grid
-from ..graph import index_dtype
+from ..graph import topology
 from ..mesh import Mesh
 from ..threads import kernel_threads
 
@@ -475,12 +475,7 @@ def _edges(cells: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarra
     behind :func:`isoconvert.graph.edge_table`), which also counts the fans
     around every vertex. Triangles that repeat a vertex are skipped.
     """
-    from .. import _native
-
-    itype = index_dtype(n, 3 * len(cells))
-    tv = np.ascontiguousarray(cells, dtype=itype)
-    key = np.zeros(n, np.uint64)
-    table = _native.topology(tv, n, key, kernel_threads(), True, wide=itype == np.int64)
+    table = topology(cells, n)
     return (
         table["all_edges"].astype(np.int64, copy=False),
         table["all_counts"].astype(np.int64, copy=False),
