@@ -334,6 +334,11 @@ def _is_2d_image(path: Path, reader: str) -> bool:
     """
     if reader == "image":
         return True
+    if reader == "raw":  # a 2D shape in the name (figure_2_4_5x5_uint8.raw)
+        from .readers.raw import layout_from_filename
+
+        layout = layout_from_filename(path)
+        return layout is not None and len(layout[0]) == 2
     try:
         if reader == "tiff":
             import tifffile

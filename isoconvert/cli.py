@@ -996,10 +996,17 @@ def batch(
     if out_dir.exists() and not out_dir.is_dir():
         raise VolumeError(f"{out_dir}: exists and is not a folder; choose another -o")
     budget = _bytes(max_memory) if max_memory else _default_budget()
+    early: list[Path] = []
     if summary is not None:  # a bad summary name fails now, not at the end
         if summary.suffix.lower() not in (".json", ".csv"):
             raise VolumeError(f"{summary}: --summary takes a .json or .csv file name")
-        check_output(summary, force or skip_existing)
+        if summary.resolve().parent.is_relative_to(out_dir.resolve()):
+            early = batching.make_folders(summary.parent)  # inside -o, which batch makes
+        try:
+            check_output(summary, force or skip_existing)
+        except IsoconvertError:
+            batching.remove_empty_folders(early)
+            raise
     rules = batching.read_mapping(levels) if levels else None
     found, skipped = batching.discover(
         inputs, recursive=recursive, exclude=out_dir, images=images or method == "squares"
@@ -1057,7 +1064,7 @@ def batch(
         scheduler=scheduler_address(scheduler),
         previews=previews,
     )
-    created = batching.make_folders(out_dir) if work else []
+    created = early + (batching.make_folders(out_dir) if work else [])
     try:
         with _batch_display(quiet, len(work), verbose) as on_done:
             try:
