@@ -165,7 +165,7 @@ def test_oblique_grid_keeps_index_coordinates():
         np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]),
         info={"grid": {"shape": [3, 3, 3], "origin": origin.tolist(), "affine": affine.tolist()}},
     )
-    out = smooth(mesh, 5, "laplacian")
+    out = smooth(mesh, 5, "laplacian", hold_below=0)  # a 4-vertex mesh
     after = (out.vertices - origin) @ np.linalg.inv(affine).T
     assert np.array_equal(out.vertices[0], mesh.vertices[0])
     np.testing.assert_allclose(after[1, :2], 0.0, atol=1e-12)
@@ -277,3 +277,21 @@ def test_zero_iterations_is_a_copy(staircase_ball):
     out = smooth(staircase_ball, 0)
     assert np.array_equal(out.vertices, staircase_ball.vertices)
     assert out.vertices is not staircase_ball.vertices
+
+
+def test_small_components_are_held_as_they_are():
+    """A single bright voxel (an octahedron of 6 vertices) would shrink to a point
+    under a low-pass filter; it is held, while the ball beside it is smoothed."""
+    f = np.zeros((40, 30, 30))
+    x, y, z = np.meshgrid(*(np.arange(n, dtype=float) for n in f.shape), indexing="ij")
+    f[((x - 14) ** 2 + (y - 15) ** 2 + (z - 15) ** 2) <= 100] = 1.0
+    f[33, 15, 15] = 1.0
+    mesh = extract(Volume(f), 0.5)
+    out = smooth(mesh, 30, "sinc")
+    speck = mesh.vertices[:, 0] > 30
+    assert np.count_nonzero(speck) == 6
+    assert np.array_equal(out.vertices[speck], mesh.vertices[speck])
+    assert np.abs(out.vertices[~speck] - mesh.vertices[~speck]).max() > 0.05
+    assert out.info["smoothing"]["held_small_components"] == 1
+    free = smooth(mesh, 30, "sinc", hold_below=0)
+    assert np.ptp(free.vertices[speck], axis=0).max() < 0.1  # what holding prevents

@@ -165,6 +165,15 @@ def post_process(
         from .smooth import smooth
 
         mesh = smooth(mesh, options.smooth, options.smooth_method, passband=options.passband)
+        held = mesh.info["smoothing"].get("held_small_components", 0)
+        if held and on_status:
+            from .smooth import MIN_COMPONENT_VERTICES
+
+            on_status(
+                f"note: smoothing held {held} components of fewer than "
+                f"{MIN_COMPONENT_VERTICES} vertices as they were (a low-pass filter shrinks "
+                "them to points); drop them with --min-size"
+            )
     if options.decimate is not None or options.max_error is not None:
         from .decimate import decimate
 

@@ -57,7 +57,7 @@ import numpy as np
 
 from ..errors import IsoconvertError
 from ..geometry import normalized_grid
-from ..graph import topology
+from ..graph import connected_components, topology
 from ..mesh import Mesh
 from ..threads import kernel_threads
 
@@ -73,6 +73,13 @@ _GAIN_TOLERANCE = 1e-3
 #: Index units, relative to the grid's largest size, within which a vertex lies
 #: on a grid boundary plane.
 _PLANE_TOLERANCE = 1e-9
+
+#: Components of fewer vertices are held as they are: a low-pass filter removes
+#: every shape from a component that small (a single voxel's octahedron, 6
+#: vertices, shrinks to a point; noise specks of 15-30 vertices to a third of
+#: their size in 30 iterations), while balls of 78 vertices or more keep their
+#: volume within 3 %.
+MIN_COMPONENT_VERTICES = 64
 
 
 @dataclass(frozen=True)
@@ -93,6 +100,9 @@ class SmoothOptions:
         Taubin's and Laplacian's positive step, in (0, 1].
     mu : float or None
         Taubin's negative step, below ``-lam``; None derives it from ``passband``.
+    hold_below : int
+        Components of fewer vertices are held as they are
+        (:data:`MIN_COMPONENT_VERTICES`; 0 smooths every component).
     """
 
     iterations: int = 20
@@ -100,6 +110,7 @@ class SmoothOptions:
     passband: float = 0.1
     lam: float = 0.5
     mu: float | None = None
+    hold_below: int = MIN_COMPONENT_VERTICES
 
     def __post_init__(self) -> None:
         if isinstance(self.iterations, bool) or not isinstance(self.iterations, int | np.integer):
@@ -144,6 +155,7 @@ def smooth(
     lam: float = 0.5,
     mu: float | None = None,
     grid: dict | None = None,
+    hold_below: int = MIN_COMPONENT_VERTICES,
 ) -> Mesh:
     """Smooth a triangle mesh, keeping its volume (``sinc``, ``taubin``).
 
@@ -156,6 +168,8 @@ def smooth(
     method : {"sinc", "taubin", "laplacian"}
         ``laplacian`` shrinks the surface (see the module docstring).
     passband, lam, mu : float
+        See :class:`SmoothOptions`.
+    hold_below : int
         See :class:`SmoothOptions`.
     grid : dict or None
         The volume's grid (``shape``, ``origin``, ``affine``, as
@@ -173,7 +187,7 @@ def smooth(
     IsoconvertError
         An empty mesh, segments, non-finite vertices or bad options.
     """
-    options = SmoothOptions(iterations, method, passband, lam, mu)
+    options = SmoothOptions(iterations, method, passband, lam, mu, hold_below)
     return smooth_with(mesh, options, grid)
 
 
@@ -207,7 +221,9 @@ def smooth_with(mesh: Mesh, options: SmoothOptions, grid: dict | None = None) ->
         return Mesh(vertices.copy(), mesh.cells, mesh.edge_ids, info)
 
     grid = grid if grid is not None else mesh.info.get("grid")
-    stencil = _Stencil(vertices, cells.astype(np.int64, copy=False), grid, source)
+    stencil = _Stencil(
+        vertices, cells.astype(np.int64, copy=False), grid, source, options.hold_below
+    )
 
     # filter on coordinates centred on the bounding box of the used vertices and
     # divided by its diagonal (VTK's NormalizeCoordinates): the sinc polynomial's
@@ -238,6 +254,7 @@ def smooth_with(mesh: Mesh, options: SmoothOptions, grid: dict | None = None) ->
         fixed_vertices=int(stencil.fixed.sum()),
         boundary_curve_vertices=int(stencil.curve.sum()),
         grid_constrained_vertices=int(stencil.n_constrained),
+        held_small_components=stencil.n_small,
     )
     info["smoothing"] = record
     return Mesh(out, mesh.cells, mesh.edge_ids, info)
@@ -339,9 +356,13 @@ class _Stencil:
     grid : dict or None
     source : str
         For messages.
+    hold_below : int
+        Components of fewer vertices are fixed.
     """
 
-    def __init__(self, vertices: np.ndarray, cells: np.ndarray, grid, source: str) -> None:
+    def __init__(
+        self, vertices: np.ndarray, cells: np.ndarray, grid, source: str, hold_below: int
+    ) -> None:
         n = len(vertices)
         edges, counts, nonmanifold_vertices = _edges(cells, n)
         a, b = edges[:, 0], edges[:, 1]
@@ -353,6 +374,11 @@ class _Stencil:
 
         fixed = (degree == 0) | on_many | ((n_boundary != 0) & (n_boundary != 2))
         fixed[nonmanifold_vertices] = True
+        component = connected_components(n, a, b)
+        size = np.bincount(component, weights=degree > 0, minlength=n)
+        self.small = (size[component] < hold_below) & (degree > 0)
+        self.n_small = int(np.count_nonzero((size > 0) & (size < hold_below)))
+        fixed |= self.small
         self.used = degree > 0
         # open-boundary vertices average their two boundary neighbours only
         self.curve = (n_boundary == 2) & ~fixed
