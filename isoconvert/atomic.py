@@ -13,8 +13,16 @@ from typing import BinaryIO
 from .errors import OutputError
 
 
-def check_output(path: str | Path, force: bool = False) -> Path:
+def check_output(path: str | Path, force: bool = False, example: str = "mesh.ply") -> Path:
     """Fail early, before any work, when ``path`` cannot be written.
+
+    Parameters
+    ----------
+    path : str or Path
+    force : bool
+        An existing file may be replaced.
+    example : str
+        A file name to suggest when ``path`` is a folder.
 
     Raises
     ------
@@ -25,7 +33,7 @@ def check_output(path: str | Path, force: bool = False) -> Path:
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     if path.is_dir():
-        raise OutputError(f"{path}: is a folder; give an output file name such as {path}/mesh.ply")
+        raise OutputError(f"{path}: is a folder; give an output file name such as {path}/{example}")
     if not folder.is_dir():
         raise OutputError(f"{path}: the folder {folder} does not exist; create it first")
     if not os.access(folder, os.W_OK | os.X_OK):
@@ -41,6 +49,17 @@ def check_output(path: str | Path, force: bool = False) -> Path:
         )
     if path.exists() and not force:
         raise OutputError(f"{path}: already exists; pass --force to overwrite it")
+    # permissions do not tell everything (root, read-only mounts, /proc): the
+    # temporary file the output is written to must be creatable there
+    try:
+        handle, probe = tempfile.mkstemp(dir=folder, prefix=".isoconvert-probe-")
+    except OSError as exc:
+        raise OutputError(
+            f"{path}: cannot create files in the folder {folder} ({exc.strerror}); "
+            "choose another output"
+        ) from None
+    os.close(handle)
+    os.unlink(probe)
     return path
 
 

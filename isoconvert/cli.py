@@ -580,7 +580,9 @@ def convert(
     from .convert import convert_labels, convert_levels, level_outputs
 
     wanted = _label_list(label)
-    labels = labels or wanted is not None or single_file
+    labels = labels or wanted is not None
+    if single_file and not labels:
+        raise IsoconvertError("--single-file writes the surfaces of --labels; add --labels")
     if labels and level:
         raise IsoconvertError("--labels extracts every label's boundary: leave out --level")
     if not labels and not level:
@@ -607,10 +609,10 @@ def convert(
         for path in reports:
             check_output(path, force)  # before the work: a bad report name must not cost a mesh
     if preview is not None:  # before the work: no renderer or a bad name must not cost a mesh
-        from .preview import require_renderer
+        from .preview import check_picture_output, require_renderer
 
         require_renderer()
-        check_output(preview, force)
+        check_picture_output(preview, force)
     start = time.perf_counter()
     with _stage_display(quiet, verbose) as (on_progress, on_status):
         if labels:
@@ -689,19 +691,24 @@ def convert(
             target = reports[n] if reports else report
             failed += _report_result(result, target, required, examples, force, quiet)
         if preview is not None:
-            _write_preview(result, preview, len(results), force, quiet)
+            _write_preview(result, preview, output, len(results), force, quiet)
     if failed:
         raise typer.Exit(EXIT_CHECK_FAILED)
 
 
-def _write_preview(result, preview: Path, count: int, force: bool, quiet: bool) -> None:
+def _write_preview(
+    result, preview: Path, output: Path, count: int, force: bool, quiet: bool
+) -> None:
     """The picture of one mesh convert wrote: ``preview`` itself for one mesh,
-    else ``PREVIEW_MESHNAME.png`` per mesh."""
+    else named like the mesh (``-o em.ply --preview pic.png`` with two levels:
+    ``pic_level80.5.png``, ``pic_level180.5.png``)."""
     from .preview import render_preview, write_preview
 
-    target = (
-        preview if count == 1 else preview.with_name(f"{preview.stem}_{result.output.stem}.png")
-    )
+    target = preview
+    if count > 1:
+        stem, base = result.output.stem, Path(output).stem
+        tail = stem[len(base) :] if stem.startswith(base) else f"_{stem}"
+        target = preview.with_name(f"{preview.stem}{tail}.png")
     picture = render_preview(result.mesh, checked=result.written, grid=result.mesh.info.get("grid"))
     write_preview(picture, target, force)
     if not quiet:
@@ -1460,7 +1467,11 @@ def main(argv: list[str] | None = None) -> int:
     _show_third_party = debug  # numpy warnings and tifffile's log lines are not for users
     args = gather_multi_values([a for a in args if a != "--debug"])
     try:
-        app(args=args, prog_name="isoconvert", standalone_mode=True)
+        result = app(args=args, prog_name="isoconvert", standalone_mode=False)
+        code = result if isinstance(result, int) else 0
+        if code == 130:  # click turns Ctrl-C into exit code 130
+            print("isoconvert: interrupted; no partial output was left", file=sys.stderr)
+        return code
     except SystemExit as exc:
         code = exc.code
         code = code if isinstance(code, int) else (0 if code is None else 1)
@@ -1482,7 +1493,23 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print("isoconvert: error: out of memory; try a smaller volume", file=sys.stderr)
         return 1
-    except Exception as exc:  # a bug, not a user mistake: say so in one line
+    except Exception as exc:
+        if _is_usage_error(exc):
+            message = exc.format_message()
+            if not message:  # `isoconvert` alone: the help was the answer
+                return 2
+            # one line, as for every other mistake (click draws a box of several)
+            ctx = getattr(exc, "ctx", None)
+            command = ctx.command_path if ctx is not None else "isoconvert"
+            print(
+                f"isoconvert: error: {one_line(message, limit=500)} (see {command} --help)",
+                file=sys.stderr,
+            )
+            return 2
+        if type(exc).__name__ == "Abort":  # click's Ctrl-C at a prompt
+            print("isoconvert: interrupted; no partial output was left", file=sys.stderr)
+            return 130
+        # a bug, not a user mistake: say so in one line
         if debug:
             raise
         print(
@@ -1492,6 +1519,12 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 3
     return 0
+
+
+def _is_usage_error(exc: Exception) -> bool:
+    """A command line click could not parse (its UsageError, which typer vendors
+    under a private name): exit code 2 and a message."""
+    return getattr(exc, "exit_code", None) == 2 and hasattr(exc, "format_message")
 
 
 if __name__ == "__main__":

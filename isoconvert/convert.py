@@ -351,6 +351,8 @@ def convert_labels(
             check_output(path, opts.force)
     progress("reading")
     volume = _read_input(input, opts)
+    if not opts.labels:
+        _check_label_volume(volume, opts.background)
     progress("extracting")
     surfaces = label_surfaces(
         volume,
@@ -383,6 +385,37 @@ def convert_labels(
             )  # fmt: skip
         )
     return results
+
+
+#: Of the face-neighbouring sample pairs inside labels (neither background), the
+#: share with different labels above which a volume is taken for an intensity
+#: image: a segmentation's labels fill regions (a few % of pairs straddle a
+#: wall), a scan's values change from sample to sample (the engine: 80 %).
+INTENSITY_SHARE = 0.3
+
+
+def _check_label_volume(volume: Volume, background: int) -> None:
+    """Refuse, before a long extraction, a volume that looks like an intensity
+    image (every value a "label"), judging from its middle layers."""
+    if volume.ndim != 3:
+        return
+    z = volume.shape[2]
+    middle = np.asarray(volume.data[:, :, max(0, z // 2 - 4) : z // 2 + 4])
+    if not np.issubdtype(middle.dtype, np.integer) and not np.issubdtype(middle.dtype, np.bool_):
+        return  # label_surfaces says whether float samples are whole numbers
+    inside = pairs = 0
+    for axis in range(3):
+        a = np.moveaxis(middle, axis, 0)
+        lo, hi = a[:-1], a[1:]
+        both = (lo != background) & (hi != background)
+        inside += int(np.count_nonzero(both))
+        pairs += int(np.count_nonzero(both & (lo != hi)))
+    if inside > 1000 and pairs > INTENSITY_SHARE * inside:
+        raise IsoconvertError(
+            f"{volume.source}: looks like an intensity image, not a label volume "
+            f"({pairs / inside:.0%} of neighbouring samples differ); extract an isosurface "
+            "with --level, or name the labels with --label 3,7"
+        )
 
 
 def _in_memory(volume: Volume) -> Volume:

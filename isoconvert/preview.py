@@ -41,6 +41,7 @@ import math
 import os
 import re
 import sys
+import urllib.parse
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -738,6 +739,24 @@ def render_preview(
     return Preview(np.asarray(image), views, marks, frame)
 
 
+def check_picture_output(output: str | Path, force: bool = False) -> Path:
+    """Fail before any work when ``output`` is not a ``.png`` name that can be written.
+
+    Raises
+    ------
+    OutputError
+    """
+    from .atomic import check_output
+    from .errors import OutputError
+
+    output = Path(output)
+    if output.is_dir():
+        return check_output(output, force, example="preview.png")  # says it is a folder
+    if output.suffix.lower() != ".png":
+        raise OutputError(f"{output}: previews are PNG pictures; name the file .png")
+    return check_output(output, force, example="preview.png")
+
+
 def write_preview(preview: Preview, output: str | Path, force: bool = False) -> Path:
     """Write ``preview`` as PNG, whole or not at all.
 
@@ -791,10 +810,9 @@ def preview_file(
         The file cannot be read, holds no triangles, or the output cannot be
         written; no output file is left behind.
     """
-    from .atomic import check_output
     from .meshfile import read_mesh
 
-    check_output(output, force)  # before the work
+    check_picture_output(output, force)  # before the work
     _renderer_check()
     mesh = read_mesh(path)
     for key, value in recorded_header(path).items():
@@ -884,7 +902,9 @@ def contact_sheet(entries: Sequence[SheetEntry], folder: str | Path) -> str:
             rel = os.path.relpath(path, folder)
         except ValueError:  # another drive (Windows)
             rel = str(path.resolve())
-        return html.escape(Path(rel).as_posix(), quote=True)
+        # a URL (# ? % and spaces in file names would be read as URL syntax), then
+        # escaped for the attribute
+        return html.escape(urllib.parse.quote(Path(rel).as_posix(), safe="/"), quote=True)
 
     cards = []
     for e in entries:
@@ -974,6 +994,7 @@ __all__ = [
     "parse_size",
     "preview_file",
     "render_preview",
+    "check_picture_output",
     "require_renderer",
     "vertex_normals",
     "write_contact_sheet",

@@ -69,7 +69,7 @@ def test_files_equal_the_api_and_share_boundaries(atlas, tmp_path):
 def test_single_file_holds_both_labels_of_each_triangle(atlas, tmp_path):
     path, labels = atlas
     out = tmp_path / "a.vtp"
-    assert main(["convert", str(path), "--single-file", "-o", str(out), "-q"]) == 0
+    assert main(["convert", str(path), "--labels", "--single-file", "-o", str(out), "-q"]) == 0
     reader = vtk.vtkXMLPolyDataReader()
     reader.SetFileName(str(out))
     reader.Update()
@@ -79,7 +79,8 @@ def test_single_file_holds_both_labels_of_each_triangle(atlas, tmp_path):
     assert np.array_equal(pairs, surfaces.boundary_labels)
     assert {tuple(p) for p in pairs.tolist()} == {(3, 0), (7, 0), (9, 0), (3, 7)}
     ply = tmp_path / "a.ply"
-    assert main(["convert", str(path), "--single-file", "-o", str(ply), "-q", "--ascii"]) == 0
+    args = ["convert", str(path), "--labels", "--single-file", "-o", str(ply), "-q", "--ascii"]
+    assert main(args) == 0
     lines = ply.read_text().splitlines()
     assert "property int inside_label" in lines and "property int outside_label" in lines
     faces = [line.split() for line in lines if line.startswith("3 ")]
@@ -102,9 +103,10 @@ def test_real_binary_scan(tmp_path):
         (["--labels", "-l", "3"], "leave out --level"),
         (["--label", "3,5"], "label 5 not in the volume; labels present: 3, 7, 9"),
         (["--label", "3,x"], "--label takes whole numbers"),
-        (["--single-file", "--format", "stl"], "cannot store per-triangle labels"),
+        (["--labels", "--single-file", "--format", "stl"], "cannot store per-triangle labels"),
+        (["--single-file"], "--single-file writes the surfaces of --labels"),
         (["--labels", "--normals"], "leave them out with --labels"),
-        (["--single-file", "--largest"], "would break the shared boundaries"),
+        (["--labels", "--single-file", "--largest"], "would break the shared boundaries"),
         ([], "convert needs --level"),
     ],
 )
@@ -115,3 +117,15 @@ def test_label_mistakes_are_one_line(atlas, tmp_path, capsys, extra, message):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 1 and len(err) == 1 and message in err[0]
     assert not list(tmp_path.glob("x*"))
+
+
+def test_an_intensity_scan_is_not_taken_for_labels(tmp_path, capsys):
+    """Every value of a CT scan would be a label: 255 files, minutes of work."""
+    src = dataset("engine_256x256x128_uint8.raw")
+    code = main(["convert", str(src), "--labels", "-o", str(tmp_path / "e.ply")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and len(err) == 1 and "looks like an intensity image" in err[0]
+    assert not list(tmp_path.iterdir())
+    # naming the labels says the user means it
+    assert main(["convert", str(src), "--label", "200", "-o", str(tmp_path / "e.ply"), "-q"]) == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["e_label200.ply"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import os
 import re
 
@@ -332,6 +333,42 @@ def test_batch_previews_contact_sheet(tmp_path, capsys):
         with Image.open(path) as image:
             assert image.format == "PNG" and image.size == (400, 300)
     assert "level 0.5" in page and "no problems found" in page
+
+
+def test_contact_sheet_links_survive_url_characters(tmp_path, capsys):
+    """File names with # ? % & ' and spaces: the links are URLs that lead to the files."""
+    import shutil
+    import urllib.parse
+
+    src = tmp_path / "in"
+    src.mkdir()
+    odd = src / "n \u00e9 #1%20?&'_40x40x40_uint8.raw"
+    shutil.copy(SAMPLES / "sphere_40x40x40_uint8.raw", odd)
+    out = tmp_path / "out"
+    code, _, err = _run(["batch", src, "-o", out, "-l", "127.5", "--previews", "-j", "1"], capsys)
+    assert code == 0, err
+    page = (out / "index.html").read_text()
+    targets = re.findall(r'(?:src|href)="([^"]+)"', page)
+    assert len(targets) == 3  # the picture, its link and the mesh's
+    for target in targets:
+        url = html.unescape(target)
+        assert "#" not in url and "?" not in url  # would be a fragment or a query
+        assert (out / urllib.parse.unquote(url)).is_file()
+
+
+def test_pictures_must_be_png_and_follow_the_mesh_names(tmp_path, capsys):
+    mesh = tmp_path / "s.ply"
+    assert main(["convert", str(SAMPLES / "sphere.nrrd"), "-l", "127.5", "-o", str(mesh)]) == 0
+    code = main(["preview", str(mesh), "-o", str(tmp_path / "p.svg")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and len(err) == 1 and "name the file .png" in err[-1]
+    assert not (tmp_path / "p.svg").exists()
+    args = ["convert", str(SAMPLES / "sphere.nrrd"), "-o", str(tmp_path / "em.ply"), "-q"]
+    assert main([*args, "-l", "100.5", "-l", "200.5", "--preview", str(tmp_path / "pic.png")]) == 0
+    assert sorted(p.name for p in tmp_path.glob("pic*")) == [
+        "pic_level100.5.png",
+        "pic_level200.5.png",
+    ]
 
 
 def test_previews_are_lazy_about_vtk():
