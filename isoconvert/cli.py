@@ -56,8 +56,9 @@ class _Group(_HelpAsFlag, typer.core.TyperGroup):
 app = typer.Typer(
     name="isoconvert",
     cls=_Group,
-    help="Turn scalar volumes and images (raw, NRRD, TIFF, Zarr, PNG, JPEG) into isosurface meshes "
-    "and contours (PLY, OBJ, OFF, VTP, STL, GLB, 3MF, SVG), and check meshes.",
+    help="Turn scalar volumes and images (raw, NRRD, TIFF, Zarr, DICOM, NIfTI, MetaImage, NumPy, "
+    "PNG, JPEG) into isosurface meshes and contours (PLY, OBJ, OFF, VTP, STL, GLB, 3MF, SVG, "
+    "GeoJSON), and check and picture meshes.",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
@@ -581,6 +582,8 @@ def convert(
 
     wanted = _label_list(label)
     labels = labels or wanted is not None
+    if background and not labels:
+        raise IsoconvertError("--background is the value of no label; it goes with --labels")
     if single_file and not labels:
         raise IsoconvertError("--single-file writes the surfaces of --labels; add --labels")
     if labels and level:
@@ -769,8 +772,11 @@ def _report_result(result, target, required, examples, force, quiet) -> list[str
     checked = check_mesh(result.written, examples=examples, source=str(result.output), grid=grid)
     if result.extracted is not None and not quiet:
         from .post.pipeline import changes
+        from .writers.stored import stored_mesh
 
-        before = check_mesh(result.extracted, examples=0, grid=grid).to_dict()
+        # both as the file stores them (STL: three vertices per triangle)
+        extracted = stored_mesh(result.extracted, result.format, result.ascii)
+        before = check_mesh(extracted, examples=0, grid=grid).to_dict()
         lines = changes(before, checked.to_dict()) or ["nothing the report measures"]
         print(f"{result.output}: post-processing changed:", file=sys.stderr)
         for line in lines:
@@ -879,7 +885,10 @@ def _emit_report(checked, target, required, *, as_json, force, quiet) -> None:
         print(json.dumps(checked.to_dict(), indent=2) if as_json else format_report(checked))
     failed = checked.failures(required)
     if failed:
-        print(f"isoconvert: required check failed: {', '.join(failed)}", file=sys.stderr)
+        print(
+            f"isoconvert: {checked.source}: required check failed: {', '.join(failed)}",
+            file=sys.stderr,
+        )
         raise typer.Exit(EXIT_CHECK_FAILED)
 
 
@@ -1254,7 +1263,7 @@ def info(
         typer.Option(
             "--plot",
             help="Also write a PNG: the histogram with the suggested levels, and the middle "
-            "slices with the contour at --level (needs pip install isoconvert[plot]).",
+            "slices with the contour at --level (needs isoconvert\\[plot]).",
         ),
     ] = None,
     plot_level: Annotated[

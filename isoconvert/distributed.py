@@ -74,7 +74,7 @@ RETRIES = 1
 #: Tasks in flight per thread of the cluster: one running, one ready to start.
 TASKS_PER_THREAD = 2
 
-_INSTALL = "running on a Dask cluster needs dask and distributed: pip install isoconvert[dask]"
+_INSTALL = "running on a Dask cluster needs dask and distributed: pip install 'isoconvert[dask]'"
 
 _clients: dict[str, Client] = {}
 _clients_lock = threading.Lock()

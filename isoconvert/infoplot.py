@@ -162,7 +162,7 @@ def require_matplotlib() -> None:
     try:
         import matplotlib  # noqa: F401
     except ImportError:
-        raise IsoconvertError("pictures need matplotlib: pip install isoconvert[plot]") from None
+        raise IsoconvertError("pictures need matplotlib: pip install 'isoconvert[plot]'") from None
 
 
 def resolve_level(spec: str | float | None, levels: dict[str, float], hist: Histogram) -> float:

@@ -56,7 +56,7 @@ DEFAULT_SIZE = (1024, 768)
 #: Thumbnail size for ``batch --previews``.
 THUMBNAIL_SIZE = (400, 300)
 #: Install hint when VTK is missing.
-INSTALL_HINT = "pip install isoconvert[render]"
+INSTALL_HINT = "pip install 'isoconvert[render]'"
 #: Problems drawn per kind at most (a mesh in pieces can have millions; the
 #: legend says when only some were drawn).
 MAX_MARKS = 20_000

@@ -272,12 +272,12 @@ def test_missing_matplotlib_is_one_line_naming_the_extra(tmp_path, monkeypatch, 
     from conftest import SAMPLES
 
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import fails
-    with pytest.raises(IsoconvertError, match=r"pip install isoconvert\[plot\]"):
+    with pytest.raises(IsoconvertError, match=r"pip install 'isoconvert\[plot\]'"):
         require_matplotlib()
     out = tmp_path / "a.png"
     assert main(["info", str(SAMPLES / "sphere.nrrd"), "--plot", str(out)]) == 1
     err = capsys.readouterr().err
-    assert "pip install isoconvert[plot]" in err and err.count("\n") == 1
+    assert "pip install 'isoconvert[plot]'" in err and err.count("\n") == 1
     assert not out.exists()
 
 

@@ -654,7 +654,7 @@ def test_zarr_bad_inputs_one_line_each(tmp_path, zyx, monkeypatch):
     monkeypatch.setitem(sys.modules, "zarr", None)  # as if not installed
     with pytest.raises(FormatError) as err:
         read_volume(tmp_path / "plain3.zarr")
-    one_line(err.value, "reading Zarr needs the zarr package: pip install isoconvert[zarr]")
+    one_line(err.value, "reading Zarr needs the zarr package: pip install 'isoconvert[zarr]'")
 
 
 @needs_zarr

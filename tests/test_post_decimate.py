@@ -88,7 +88,7 @@ def test_open_ball_boundary_unchanged():
 def test_missing_extra_names_the_install(monkeypatch):
     monkeypatch.setitem(sys.modules, "meshoptimizer", None)  # import now fails
     mesh = extract(Volume(ball(12, 4.2)), 0.0)
-    with pytest.raises(IsoconvertError, match=r"pip install isoconvert\[simplify\]"):
+    with pytest.raises(IsoconvertError, match=r"pip install 'isoconvert\[simplify\]'"):
         decimate(mesh, reduction=0.5)
 
 

@@ -399,7 +399,7 @@ def test_missing_vtk_is_a_one_line_error(monkeypatch, tmp_path, capsys):
     ply = tmp_path / "t.ply"
     write_mesh(mesh, ply)
     code, out, err = _run(["preview", ply, "-o", tmp_path / "t.png"], capsys)
-    assert code == 1 and "pip install isoconvert[render]" in err
+    assert code == 1 and "pip install 'isoconvert[render]'" in err
     assert len(err.strip().splitlines()) == 1
     assert not (tmp_path / "t.png").exists()
 

@@ -254,7 +254,7 @@ def test_missing_nibabel_is_one_line(tmp_path, xyz, monkeypatch):
 
     monkeypatch.setattr(builtins, "__import__", no_nibabel)
     msg = one_line_error(path, FormatError)
-    assert msg == "reading NIfTI needs nibabel: pip install isoconvert[nifti]"
+    assert msg == "reading NIfTI needs nibabel: pip install 'isoconvert[nifti]'"
 
 
 def test_folder_of_nifti_files_says_give_the_file(tmp_path, xyz):

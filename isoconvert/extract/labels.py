@@ -232,7 +232,7 @@ def label_surfaces(
         raise LevelError(f"{volume.source}: no label surface (every sample is background)")
     if split and on_status:
         on_status(
-            f"labels: {split} vertices split where a label touches itself only along "
+            f"note: labels: {split} vertices split where a label touches itself only along "
             "an edge or at a corner (kept manifold)"
         )
     vertices = volume.index_to_world(positions)

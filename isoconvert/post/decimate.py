@@ -38,7 +38,7 @@ from ..errors import IsoconvertError
 from ..graph import connected_components, ragged_pairs, topology
 from ..mesh import Mesh
 
-_NEEDS = "decimation needs meshoptimizer: pip install isoconvert[simplify]"
+_NEEDS = "decimation needs meshoptimizer: pip install 'isoconvert[simplify]'"
 #: Collapses (each with more vertices locked, or a tighter limit) before giving the
 #: input back unchanged.
 _MAX_ATTEMPTS = 12

@@ -109,7 +109,8 @@ class PostOptions:
             raise IsoconvertError(f"--close caps cubes surfaces; use --method cubes (got {method})")
         if self.steps and method == "squares":
             raise IsoconvertError(
-                f"{', '.join(self.steps)} work on surfaces; squares gives contours"
+                f"post-processing ({', '.join(self.steps)}) works on surfaces; squares gives "
+                "contours"
             )
 
 

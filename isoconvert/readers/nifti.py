@@ -32,7 +32,7 @@ from ..memory import check_fits
 from ..volume import Volume
 from .options import ReadOptions
 
-_NEEDS = "reading NIfTI needs nibabel: pip install isoconvert[nifti]"
+_NEEDS = "reading NIfTI needs nibabel: pip install 'isoconvert[nifti]'"
 _RAS_NOTE = "coordinates in RAS (NIfTI's frame)"
 _UNITS = {"mm": "mm", "micron": "µm", "meter": "m"}
 _GZIP_MAGIC = b"\x1f\x8b"

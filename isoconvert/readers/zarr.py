@@ -42,7 +42,7 @@ def _zarr(path: Path):
         import zarr
     except ImportError:
         raise FormatError(
-            f"{path}: reading Zarr needs the zarr package: pip install isoconvert[zarr]"
+            f"{path}: reading Zarr needs the zarr package: pip install 'isoconvert[zarr]'"
         ) from None
     return zarr
 
