@@ -34,9 +34,34 @@ void umbrella(const i64 *offsets, const i64 *neighbours, const double *inverse_c
   });
 }
 
+// One step of the windowed-sinc filter's Chebyshev recurrence, in place:
+// x2 = 2 x1 - L x1 - x0 (lap holds L x1 and becomes x2), out += c x2.
+void chebyshev_step(const double *x0, const double *x1, double *lap, double c, i64 n,
+                    int threads, double *out) {
+  iso::parallel_for(n, threads, 1 << 16, [&](int, i64 begin, i64 end) {
+    for (i64 i = begin; i < end; ++i) {
+      const double x2 = 2.0 * x1[i] - lap[i] - x0[i];
+      lap[i] = x2;
+      out[i] += c * x2;
+    }
+  });
+}
+
 }  // namespace
 
 void bind_smooth(nb::module_ &m) {
+  m.def(
+      "chebyshev_step",
+      [](Doubles x0, Doubles x1, Out<double> lap, double c, int threads, Out<double> out) {
+        const i64 n = i64(x0.size());
+        if (i64(x1.size()) != n || i64(lap.size()) != n || i64(out.size()) != n) {
+          throw std::invalid_argument("chebyshev_step: x0, x1, lap and out of one size");
+        }
+        nb::gil_scoped_release unlocked;
+        chebyshev_step(x0.data(), x1.data(), lap.data(), c, n, threads, out.data());
+      },
+      "x0"_a, "x1"_a, "lap"_a.noconvert(), "c"_a, "threads"_a, "out"_a.noconvert(),
+      "x2 = 2 x1 - lap - x0 written over lap, and out += c x2 (arrays of one size).");
   m.def(
       "umbrella",
       [](Int64s offsets, Int64s neighbours, Doubles inverse_count, Doubles x, int threads,

@@ -333,15 +333,14 @@ def _sinc(x0: np.ndarray, stencil: _Stencil, c: np.ndarray) -> np.ndarray:
     -------
     (3, V) float64
     """
+    from .. import _native
+
     # T_0 x = x, T_1 x = x - L x / 2, T_{i+1} x = 2 (I - L / 2) T_i x - T_{i-1} x
     x1 = x0 - 0.5 * stencil.laplacian(x0)
     out = c[0] * x0 + c[1] * x1
     for ci in c[2:]:
-        x2 = stencil.laplacian(x1)
-        np.subtract(x1, x2, out=x2)
-        x2 += x1
-        x2 -= x0
-        out += ci * x2
+        x2 = stencil.laplacian(x1)  # L x1, made x2 = 2 x1 - L x1 - x0 in one pass
+        _native.chebyshev_step(x0, x1, x2, float(ci), stencil.threads, out)
         x0, x1 = x1, x2
     return out
 
