@@ -1,0 +1,105 @@
+"""Reading mesh files (PLY, OBJ, OFF, STL, VTP, GLB, 3MF) for ``isoconvert check``.
+
+PLY, OBJ, OFF, VTP, GLB and 3MF are read here, with the standard library and
+numpy only (VTK and trimesh are test extras, never needed at run time), so
+that vertices and cells come back exactly as the file holds them (the file's
+vertex indices, nothing merged, reordered or dropped) and so that a header's
+grid record and a bad vertex index can be told; STL, which has no indices, is
+read by trimesh.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import FormatError, InputNotFoundError, one_line
+from ..mesh import Mesh
+from .common import _Unreadable
+from .glb import _read_glb
+from .obj import _read_obj
+from .off import _read_off
+from .ply import _read_ply
+from .stl import _read_stl
+from .threemf import _read_3mf
+from .vtp import _read_vtp
+
+__all__ = ["MESH_SUFFIXES", "read_mesh"]
+
+MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl", ".vtp", ".glb", ".3mf")
+
+#: The reader of each suffix but ".stl" (trimesh's, whose errors _read_stl words itself).
+_READERS = {
+    ".ply": _read_ply,
+    ".obj": _read_obj,
+    ".off": _read_off,
+    ".vtp": _read_vtp,
+    ".glb": _read_glb,
+    ".3mf": _read_3mf,
+}
+
+
+def read_mesh(path: str | Path) -> Mesh:
+    """Read triangles, or contour segments, from a PLY, OBJ, OFF, STL, VTP, GLB or 3MF file.
+
+    Vertices and cells come back as the file holds them: PLY, OBJ, OFF, VTP,
+    GLB and 3MF with the file's vertex order and indices (polygons split into
+    fans of triangles; several VTP pieces, glTF primitives or 3MF objects one
+    after the other, placed by their node or build transforms), STL with three
+    vertices per triangle (trimesh, ``process=False``); the report merges
+    equal positions itself and says how many it merged.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    Mesh
+        ``vertices (V, 3) float64`` (values of the stored precision) and
+        ``cells (C, 3)`` or ``(C, 2)`` int64 with indices in ``0..V-1``.
+        ``info`` has ``source`` (the path), ``stored_precision`` ("float32"
+        for PLY ``float`` coordinates, VTP ``Float32`` points, GLB and STL;
+        "float64" for PLY ``double`` or integer coordinates, OBJ, OFF and VTP
+        ``Float64``; for 3MF's text, float32 when every coordinate is a float32
+        value) and, when the file records a well-formed grid as isoconvert's
+        writers do (PLY/OBJ/OFF header comment, VTP comment or ``isoconvert``
+        field array, GLB ``asset.extras``, 3MF ``isoconvert:grid`` metadata),
+        ``grid``.
+
+    Raises
+    ------
+    InputNotFoundError
+        No such file.
+    FormatError
+        Unknown suffix, unreadable file, no triangles or segments, or a cell
+        that refers to a vertex that does not exist (the message names the
+        cell and the index).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputNotFoundError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise FormatError(
+            f"{path}: unknown mesh extension {suffix or '(none)'!r}; "
+            f"check reads {', '.join(MESH_SUFFIXES)}"
+        )
+    if suffix == ".stl":
+        return _read_stl(path)
+    reader = _READERS[suffix]
+    try:
+        return reader(path)
+    except (
+        _Unreadable,
+        ValueError,
+        TypeError,
+        KeyError,
+        IndexError,
+        OverflowError,
+        AttributeError,
+        RecursionError,
+    ) as exc:
+        # a file broken in a way the reader does not name
+        raise FormatError(
+            f"{path}: not a readable {suffix[1:].upper()} mesh ({one_line(exc)})"
+        ) from None
