@@ -578,7 +578,8 @@ def convert(
     from .report import parse_requirements
 
     required = parse_requirements(require)
-    from .convert import convert_labels, convert_levels, level_outputs
+    from .convert import convert_levels, level_outputs
+    from .label_convert import convert_labels
 
     wanted = _label_list(label)
     labels = labels or wanted is not None

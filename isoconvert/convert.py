@@ -261,7 +261,7 @@ def convert_levels(
     if any(path.resolve() == Path(input).resolve() for path in outputs):
         raise OutputError(f"{output}: is the input file; choose another output name")
     progress("reading")
-    volume = _read_input(input, opts)
+    volume = read_input(input, opts)
     opts.post.check_method(opts.method or default_method(volume))
     if opts.normals:
         check_3d(volume, "normals")
@@ -274,7 +274,7 @@ def convert_levels(
     ]
 
 
-def _read_input(input: str | Path, opts: ConvertOptions) -> Volume:
+def read_input(input: str | Path, opts: ConvertOptions) -> Volume:
     """The input volume, in the frame ``opts.space`` asks for."""
     volume = read_volume(
         input,
@@ -288,134 +288,6 @@ def _read_input(input: str | Path, opts: ConvertOptions) -> Volume:
     if opts.source_name is not None:
         volume.source = opts.source_name
     return volume
-
-
-def label_outputs(output: str | Path, labels: Sequence[int]) -> list[Path]:
-    """Where each label's surface goes: ``NAME_labelL.SUFFIX`` beside ``output``."""
-    output = Path(output)
-    return [output.with_name(f"{output.stem}_label{label}{output.suffix}") for label in labels]
-
-
-def convert_labels(
-    input: str | Path,
-    output: str | Path,
-    labels: Sequence[int] = (),
-    options: ConvertOptions | None = None,
-    *,
-    on_status: Callable[[str], None] | None = None,
-    on_progress: Callable[[str], None] | None = None,
-    **changes,
-) -> list[ConvertResult]:
-    """The surfaces of the labels of a label volume (segmentation, atlas), by
-    Surface Nets (:func:`isoconvert.extract.labels.label_surfaces`), each closed
-    and sharing its boundary with its neighbours exactly.
-
-    Parameters
-    ----------
-    input, output : str or Path
-        Without ``single_file``, label L goes to :func:`label_outputs`
-        (``atlas_label3.ply``); with it, everything goes to ``output``, each
-        triangle with the labels on its two sides (PLY, VTP).
-    labels : sequence of int
-        The labels to extract; empty: every label but the background.
-    options : ConvertOptions or None
-        ``label_smoothing`` is the number of Surface Nets relaxation iterations
-        (default 16; 0 gives the voxel faces). The post-processing steps but
-        closing and smoothing (label surfaces are closed and smoothed already)
-        run on each label's surface, which then no longer shares its boundary
-        exactly; not with ``single_file``.
-    on_status, on_progress, **changes
-        As :func:`convert`.
-    """
-    from .extract.labels import label_surfaces
-
-    opts = (options or ConvertOptions()).updated(labels=tuple(labels), **changes)
-    progress = on_progress or (lambda stage: None)
-    writer = output_format(output, opts.format)
-    if opts.normals or opts.values is not None:
-        raise IsoconvertError(
-            "--normals and --values sample an isosurface's volume; label surfaces have "
-            "neither: leave them out with --labels"
-        )
-    post = replace(opts.post, close=False, smooth=0)  # label surfaces are closed and smoothed
-    if opts.single_file:
-        check_output(output, opts.force)
-        check_attributes(writer, output, labels=True)
-        if post.steps:
-            raise IsoconvertError(
-                f"{', '.join(post.steps)} would break the shared boundaries of "
-                "--single-file; write one file per label instead"
-            )
-    elif opts.labels:
-        for path in label_outputs(output, opts.labels):
-            check_output(path, opts.force)
-    progress("reading")
-    volume = _read_input(input, opts)
-    if not opts.labels:
-        _check_label_volume(volume, opts.background)
-    progress("extracting")
-    surfaces = label_surfaces(
-        volume,
-        opts.labels or None,
-        background=opts.background,
-        smoothing=opts.label_smoothing,
-        on_status=on_status,
-    )
-    if opts.single_file:
-        mesh = surfaces.combined
-        mesh.cell_labels = surfaces.boundary_labels
-        progress("writing")
-        path = write_mesh(mesh, output, format=writer.name, ascii=opts.ascii, force=opts.force)
-        return [ConvertResult(volume, mesh, path, writer.name, opts.ascii)]
-    outputs = label_outputs(output, surfaces.labels)
-    for path in outputs:  # every name is checked before the first file is written
-        check_output(path, opts.force)
-    results = []
-    for label, path in zip(surfaces.labels, outputs, strict=True):
-        mesh = extracted = surfaces[label]
-        if post.steps:
-            progress("post-processing")
-            mesh = post_process(mesh, volume, post, ambiguity=DEFAULT_AMBIGUITY, flip=False,
-                                nan_as=None, on_status=on_status)  # fmt: skip
-        progress("writing")
-        written = write_mesh(mesh, path, format=writer.name, ascii=opts.ascii, force=opts.force)
-        results.append(
-            ConvertResult(
-                volume, mesh, written, writer.name, opts.ascii, extracted if post.steps else None
-            )  # fmt: skip
-        )
-    return results
-
-
-#: Of the face-neighbouring sample pairs inside labels (neither background), the
-#: share with different labels above which a volume is taken for an intensity
-#: image: a segmentation's labels fill regions (a few % of pairs straddle a
-#: wall), a scan's values change from sample to sample (the engine: 80 %).
-INTENSITY_SHARE = 0.3
-
-
-def _check_label_volume(volume: Volume, background: int) -> None:
-    """Refuse, before a long extraction, a volume that looks like an intensity
-    image (every value a "label"), judging from its middle layers."""
-    if volume.ndim != 3:
-        return
-    z = volume.shape[2]
-    middle = np.asarray(volume.data[:, :, max(0, z // 2 - 4) : z // 2 + 4])
-    if not np.issubdtype(middle.dtype, np.integer) and not np.issubdtype(middle.dtype, np.bool_):
-        return  # label_surfaces says whether float samples are whole numbers
-    inside = pairs = 0
-    for axis in range(3):
-        a = np.moveaxis(middle, axis, 0)
-        lo, hi = a[:-1], a[1:]
-        both = (lo != background) & (hi != background)
-        inside += int(np.count_nonzero(both))
-        pairs += int(np.count_nonzero(both & (lo != hi)))
-    if inside > 1000 and pairs > INTENSITY_SHARE * inside:
-        raise IsoconvertError(
-            f"{volume.source}: looks like an intensity image, not a label volume "
-            f"({pairs / inside:.0%} of neighbouring samples differ); extract an isosurface "
-            "with --level, or name the labels with --label 3,7"
-        )
 
 
 def _in_memory(volume: Volume) -> Volume:

@@ -9,8 +9,8 @@ from conftest import dataset
 
 from isoconvert import check_mesh
 from isoconvert.cli import main
-from isoconvert.convert import convert_labels
 from isoconvert.extract.labels import label_surfaces
+from isoconvert.label_convert import convert_labels
 from isoconvert.meshfile import read_mesh
 from isoconvert.volume import Volume
 
