@@ -528,6 +528,7 @@ def plan(
     force: bool = False,
     options: dict | None = None,
     raw_options: dict | None = None,
+    labels: bool = False,
 ) -> tuple[list[Job], list[Outcome]]:
     """Jobs for the found volumes; outcomes for those skipped because done.
 
@@ -542,7 +543,9 @@ def plan(
     ``out_dir``; a name still taken gets a number (``x-2.ply``).
 
     Several levels give each file one job per level, ``NAME_levelL.ply`` (a
-    mapping entry's level overrides them with its one).
+    mapping entry's level overrides them with its one). With ``labels`` a file
+    needs no level: its job writes ``NAME_labelL.ply`` per label (its output
+    counts as existing when one of those does).
     """
     levels = list(level) if isinstance(level, list | tuple) else [level]
     out_dir = Path(out_dir)
@@ -573,6 +576,8 @@ def plan(
             file_levels = [(lv, out_dir / path) for lv, path in zip(levels, named, strict=True)]
         else:
             file_levels = [(levels[0], output)]
+        if labels:
+            file_levels = [("labels", output)]
         for job_level, output in file_levels:
             _add_job(f, output, job_level, job_options, jobs, done, skip_existing, force)
     return jobs, done
@@ -600,16 +605,20 @@ def _add_job(
             )
         )
         return
-    if output.exists() and skip_existing:
+    exists, shown = output.exists(), output
+    if job_level == "labels":  # the job writes NAME_labelL.ply files
+        shown = output.with_name(f"{output.stem}_label*{output.suffix}")
+        exists = any(output.parent.glob(f"{globlib.escape(output.stem)}_label*{output.suffix}"))
+    if exists and skip_existing:
         done.append(Outcome(f.spec, str(output), "skipped", message="output exists"))
         return
-    if output.exists() and not force:
+    if exists and not force:
         done.append(
             Outcome(
                 f.spec,
                 str(output),
                 "failed",
-                message=f"{output}: already exists; pass --force or --skip-existing",
+                message=f"{shown}: already exists; pass --force or --skip-existing",
             )
         )
         return
@@ -769,7 +778,12 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
         options = settings.options.updated(force=True, **job.options)
         created = make_folders(Path(job.output).parent)
         try:
-            result = convert(job.input, job.output, job.level, options)
+            if options.labels is not None:
+                from .label_convert import convert_labels
+
+                results = convert_labels(job.input, job.output, options.labels, options)
+            else:
+                results = [convert(job.input, job.output, job.level, options)]
         except BaseException:
             remove_empty_folders(created)  # a failed file leaves no empty folder behind
             raise
@@ -779,28 +793,39 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
         return failed(f"{job.input}: out of memory; convert it alone or lower --jobs")
     except Exception as exc:  # a bug: report it for this file, keep the others going
         return failed(f"{job.input}: internal error {type(exc).__name__}: {exc}")
-    mesh = result.mesh
+    labels = settings.options.labels is not None
     outcome = Outcome(
         job.input,
         job.output,
         "ok",
-        level=float(mesh.info["level"]),
-        vertices=mesh.n_vertices,
-        cells=mesh.n_cells,
+        level=None if labels else float(results[0].mesh.info["level"]),
+        vertices=sum(r.mesh.n_vertices for r in results),
+        cells=sum(r.mesh.n_cells for r in results),
+        message=f"{len(results)} label surfaces" if labels else "",
     )
-    if require:
-        report = check_mesh(result.written, source=job.output, grid=mesh.info.get("grid"))
-        outcome.checks = {name: report.checks[name] for name in require}
-        failed = report.failures(require)
-        if failed:
-            outcome.status = "check-failed"
-            outcome.message = f"{job.output}: required check failed: {', '.join(failed)}"
-    if settings.previews and mesh.is_triangles:
-        from .preview import batch_thumbnail
+    notes = [outcome.message] if outcome.message else []
+    checks: dict = {}
+    for result in results:
+        mesh = result.mesh
+        if require:
+            report = check_mesh(
+                result.written, source=str(result.output), grid=mesh.info.get("grid")
+            )
+            for name in require:  # a check passes when it passes for every file
+                checks[name] = checks.get(name, True) and report.checks[name]
+            failed = report.failures(require)
+            if failed:
+                outcome.status = "check-failed"
+                notes.append(f"{result.output}: required check failed: {', '.join(failed)}")
+        if settings.previews and mesh.is_triangles:
+            from .preview import batch_thumbnail
 
-        # a thumbnail that cannot be made costs the picture, not the mesh
-        why = batch_thumbnail(mesh, result.written, job.output, mesh.info.get("grid"))
-        outcome.message = "; ".join(m for m in (outcome.message, why) if m)
+            # a thumbnail that cannot be made costs the picture, not the mesh
+            why = batch_thumbnail(mesh, result.written, str(result.output), mesh.info.get("grid"))
+            notes += [why] if why else []
+    if require:
+        outcome.checks = checks
+    outcome.message = "; ".join(notes)
     outcome.seconds = time.perf_counter() - start
     return outcome
 

@@ -264,6 +264,30 @@ MaxErrorOpt = Annotated[
         rich_help_panel=_POST,
     ),
 ]
+LabelsOpt = Annotated[
+    bool,
+    _flag(
+        "--labels",
+        help="A label volume: one closed surface per label (Surface Nets), NAME_labelL.ply; "
+        "--smooth N sets its relaxation iterations (default 16).",
+        rich_help_panel="Labels",
+    ),
+]
+LabelOpt = Annotated[
+    str | None,
+    typer.Option(help="Only these labels, e.g. 3,7 (implies --labels).", rich_help_panel="Labels"),
+]
+SingleFileOpt = Annotated[
+    bool,
+    _flag(
+        "--single-file",
+        help="Labels: one mesh, each triangle with the labels on its two sides (PLY, VTP).",
+        rich_help_panel="Labels",
+    ),
+]
+BackgroundOpt = Annotated[
+    int, typer.Option(help="Labels: the value of no label.", rich_help_panel="Labels")
+]
 NormalsOpt = Annotated[
     bool,
     _flag(
@@ -546,32 +570,10 @@ def convert(
         ),
     ] = None,
     scheduler: SchedulerOpt = None,
-    labels: Annotated[
-        bool,
-        _flag(
-            "--labels",
-            help="A label volume: one closed surface per label (Surface Nets), NAME_labelL.ply; "
-            "--smooth N sets its relaxation iterations (default 16).",
-            rich_help_panel="Labels",
-        ),
-    ] = False,
-    label: Annotated[
-        str | None,
-        typer.Option(
-            help="Only these labels, e.g. 3,7 (implies --labels).", rich_help_panel="Labels"
-        ),
-    ] = None,
-    single_file: Annotated[
-        bool,
-        _flag(
-            "--single-file",
-            help="Labels: one mesh, each triangle with the labels on its two sides (PLY, VTP).",
-            rich_help_panel="Labels",
-        ),
-    ] = False,
-    background: Annotated[
-        int, typer.Option(help="Labels: the value of no label.", rich_help_panel="Labels")
-    ] = 0,
+    labels: LabelsOpt = False,
+    label: LabelOpt = None,
+    single_file: SingleFileOpt = False,
+    background: BackgroundOpt = 0,
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
     _quiet_third_party()
@@ -581,18 +583,7 @@ def convert(
     from .convert import convert_levels, level_outputs
     from .label_convert import convert_labels
 
-    wanted = _label_list(label)
-    labels = labels or wanted is not None
-    if background and not labels:
-        raise IsoconvertError("--background is the value of no label; it goes with --labels")
-    if single_file and not labels:
-        raise IsoconvertError("--single-file writes the surfaces of --labels; add --labels")
-    if labels and level:
-        raise IsoconvertError("--labels extracts every label's boundary: leave out --level")
-    if not labels and not level:
-        raise IsoconvertError(
-            "convert needs --level (a number, or auto), or --labels for a label volume"
-        )
+    labels, wanted = _label_choice(labels, label, single_file, background, level, "convert")
 
     post = _post_options(
         close,
@@ -717,6 +708,24 @@ def _write_preview(
     write_preview(picture, target, force)
     if not quiet:
         print(f"wrote {target}: preview", file=sys.stderr)
+
+
+def _label_choice(labels, label, single_file, background, level, command: str):
+    """Whether the labels of a label volume are wanted, and which (None: all),
+    from --labels, --label, --single-file, --background and --level."""
+    wanted = _label_list(label)
+    labels = labels or wanted is not None
+    if background and not labels:
+        raise IsoconvertError("--background is the value of no label; it goes with --labels")
+    if single_file and not labels:
+        raise IsoconvertError("--single-file writes the surfaces of --labels; add --labels")
+    if labels and level:
+        raise IsoconvertError("--labels extracts every label's boundary: leave out --level")
+    if not labels and not level and command == "convert":
+        raise IsoconvertError(
+            "convert needs --level (a number, or auto), or --labels for a label volume"
+        )
+    return labels, wanted
 
 
 def _label_list(text: str | None) -> tuple[int, ...] | None:
@@ -972,6 +981,10 @@ def batch(
     decimate: DecimateOpt = None,
     max_error: MaxErrorOpt = None,
     scheduler: SchedulerOpt = None,
+    labels: LabelsOpt = False,
+    label: LabelOpt = None,
+    single_file: SingleFileOpt = False,
+    background: BackgroundOpt = 0,
     previews: Annotated[
         bool,
         _flag(
@@ -989,7 +1002,8 @@ def batch(
 
     required = parse_requirements(require)
     writer = WRITERS.get(format)
-    check_attributes(writer, "--format", normals=normals)
+    check_attributes(writer, "--format", normals=normals, labels=single_file)
+    labels, wanted = _label_choice(labels, label, single_file, background, level, "batch")
     post = _post_options(
         close,
         largest,
@@ -1008,8 +1022,8 @@ def batch(
         from .preview import require_renderer
 
         require_renderer()
-    if not level and levels is None:
-        raise VolumeError("batch needs --level (a number or auto) or --levels FILE")
+    if not level and levels is None and not labels:
+        raise VolumeError("batch needs --level (a number or auto), --levels FILE or --labels")
     if out_dir.exists() and not out_dir.is_dir():
         raise VolumeError(f"{out_dir}: exists and is not a folder; choose another -o")
     budget = _bytes(max_memory) if max_memory else _default_budget()
@@ -1056,6 +1070,7 @@ def batch(
         force=force,
         options=common,
         raw_options={k: v for k, v in raw.items() if v is not None},
+        labels=labels,
     )
     for item in skipped:
         outcomes.append(batching.Outcome(item.path, "", "skipped", message=item.reason))
@@ -1074,6 +1089,10 @@ def batch(
             space=space,
             normals=normals,
             post=post,
+            labels=(wanted or ()) if labels else None,
+            single_file=single_file,
+            background=background,
+            label_smoothing=smooth,
             # the files running at once share the budget
             blocks=Blocks(max_memory=max(1, budget // workers) if budget else None),
         ),

@@ -129,3 +129,26 @@ def test_an_intensity_scan_is_not_taken_for_labels(tmp_path, capsys):
     # naming the labels says the user means it
     assert main(["convert", str(src), "--label", "200", "-o", str(tmp_path / "e.ply"), "-q"]) == 0
     assert [p.name for p in tmp_path.iterdir()] == ["e_label200.ply"]
+
+
+def test_batch_extracts_the_labels_of_every_file(atlas, tmp_path, capsys):
+    path, labels = atlas
+    folder = tmp_path / "in"
+    folder.mkdir()
+    path.rename(folder / "a.nrrd")
+    nrrd.write(str(folder / "b.nrrd"), (labels == 9).astype(np.uint8), index_order="F")
+    out = tmp_path / "out"
+    args = ["batch", str(folder), "-o", str(out), "--labels", "--smooth", "0", "-q"]
+    assert main([*args, "--require", "watertight", "--summary", str(tmp_path / "s.json")]) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["a_label3.ply", "a_label7.ply", "a_label9.ply", "b_label1.ply"]
+    ball = read_mesh(out / "b_label1.ply")
+    assert np.isclose(ball.signed_volume(), np.count_nonzero(labels == 9))
+    import json
+
+    rows = json.loads((tmp_path / "s.json").read_text())["files"]
+    assert [r["status"] for r in rows] == ["ok", "ok"]
+    # the label files count as the file's output
+    assert main([*args, "--summary", str(tmp_path / "s2.json")]) == 1
+    rows = json.loads((tmp_path / "s2.json").read_text())["files"]
+    assert "a_label*.ply: already exists" in rows[0]["message"]
