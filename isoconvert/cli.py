@@ -1107,7 +1107,8 @@ def batch(
                 outcomes += batching.run_jobs(work, settings, workers, budget, on_done)
             except KeyboardInterrupt:
                 raise typer.Exit(130) from None  # main() says so
-        outcomes.sort(key=lambda o: natural_text_key(o.input))
+        # by file, then by output (NAME_level60.5 before NAME_level128.5)
+        outcomes.sort(key=lambda o: (natural_text_key(o.input), natural_text_key(o.output)))
         if summary is not None:
             from .atomic import atomic_output
 

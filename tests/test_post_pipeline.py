@@ -262,5 +262,11 @@ def test_batch_writes_one_mesh_per_level_like_convert(tmp_path, capsys):
         read = read_mesh(out / f"sphere_level{level:g}.ply")
         assert np.array_equal(read.cells, single.cells)
         assert np.allclose(read.vertices, single.vertices, atol=1e-4)
+    summary = tmp_path / "s.json"
+    assert main([*args, "-q", "-f", "-l", "60.5", "--summary", str(summary)]) == 0
+    import json
+
+    rows = json.loads(summary.read_text())["files"]
+    assert [r["level"] for r in rows] == [60.5, 100.5, 200.5]  # by level, not by text
     assert main(["batch", str(src), "-o", str(tmp_path / "o2"), "-l", "1", "-l", "1"]) == 1
     assert "given twice" in capsys.readouterr().err
