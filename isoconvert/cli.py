@@ -1350,6 +1350,7 @@ def info(
 
         # the same histogram and levels as printed below, so the marks equal --json's
         write_info_plot(volume, plot, plot_level, hist=hist, levels=levels, force=force)
+        print(f"wrote {plot}: histogram and middle slices", file=sys.stderr)
     summary = {
         "source": volume.source,
         "shape": list(volume.shape),
