@@ -763,6 +763,7 @@ class BatchSettings:
 def run_one(job: Job, settings: BatchSettings) -> Outcome:
     """Convert one volume; every failure becomes an outcome, never an exception."""
     from .convert import convert
+    from .preview.marks import MAX_MARKS
     from .report import check_mesh
 
     start = time.perf_counter()
@@ -807,10 +808,12 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
     checks: dict = {}
     for result in results:
         mesh = result.mesh
+        grid = mesh.info.get("grid")
+        report = None
         if require:
-            report = check_mesh(
-                result.written, source=str(result.output), grid=mesh.info.get("grid")
-            )
+            # one check for --require and the thumbnail's marks (which want more examples)
+            more = {"examples": MAX_MARKS} if settings.previews else {}
+            report = check_mesh(result.written, source=str(result.output), grid=grid, **more)
             for name in require:  # a check passes when it passes for every file
                 checks[name] = checks.get(name, True) and report.checks[name]
             failed = report.failures(require)
@@ -821,7 +824,7 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
             from .preview import batch_thumbnail
 
             # a thumbnail that cannot be made costs the picture, not the mesh
-            why = batch_thumbnail(mesh, result.written, str(result.output), mesh.info.get("grid"))
+            why = batch_thumbnail(mesh, result.written, str(result.output), grid, report)
             notes += [why] if why else []
     if require:
         outcome.checks = checks

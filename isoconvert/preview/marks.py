@@ -47,7 +47,7 @@ class Marks:
     boundary_frame: str = ""
 
 
-def find_marks(mesh: Mesh, grid: dict | None = None, limit: int = MAX_MARKS) -> Marks:
+def find_marks(mesh: Mesh, grid: dict | None = None, limit: int = MAX_MARKS, report=None) -> Marks:
     """The report's problems of ``mesh`` as positions to draw.
 
     Parameters
@@ -58,10 +58,14 @@ def find_marks(mesh: Mesh, grid: dict | None = None, limit: int = MAX_MARKS) -> 
         The grid boundaries are judged against (default ``mesh.info["grid"]``).
     limit : int
         At most this many of each kind (the report's first ones).
+    report : MeshReport or None
+        The report of ``mesh`` when the caller has it, made with ``examples=limit``
+        (a batch checks each mesh once for ``--require`` and the thumbnail).
     """
-    from ..report import check_mesh
+    if report is None:
+        from ..report import check_mesh
 
-    report = check_mesh(mesh, examples=limit, grid=grid)
+        report = check_mesh(mesh, examples=limit, grid=grid)
     v = np.asarray(mesh.vertices, dtype=np.float64)
     marks = Marks(boundary_frame=report.boundary_frame)
     for name in PROBLEMS:

@@ -108,6 +108,7 @@ def render_preview(
     checked: Mesh | None = None,
     grid: dict | None = None,
     problems: bool = True,
+    report=None,
 ) -> Preview:
     """Render ``mesh`` from four views with its problems drawn on it.
 
@@ -127,6 +128,8 @@ def render_preview(
         The grid boundaries are judged against (default ``info["grid"]``).
     problems : bool
         Check the mesh and draw its problems.
+    report : MeshReport or None
+        The report of ``checked`` when the caller has it (see :func:`find_marks`).
 
     Returns
     -------
@@ -159,7 +162,9 @@ def render_preview(
         mesh = Mesh(mesh.vertices, mesh.cells[keep], info=mesh.info, normals=normals)
     pixels = _render_surface(mesh, views, layout, rgb)
     pixels[layout.height - layout.footer :] = rgb
-    marks = find_marks(checked if checked is not None else mesh, grid) if problems else None
+    marks = None
+    if problems:
+        marks = find_marks(checked if checked is not None else mesh, grid, report=report)
     frame = str(mesh.info.get("frame", "")).upper() or None
     frame = frame if frame in ("LPS", "RAS") else None
     image = Image.fromarray(pixels)

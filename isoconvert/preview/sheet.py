@@ -151,13 +151,18 @@ def write_contact_sheet(
     return path
 
 
-def batch_thumbnail(mesh: Mesh, checked: Mesh, output: str | Path, grid: dict | None) -> str:
+def batch_thumbnail(
+    mesh: Mesh, checked: Mesh, output: str | Path, grid: dict | None, report=None
+) -> str:
     """Write a batch job's thumbnail beside its mesh; returns "" or why it failed.
 
-    Called in the worker that converted the mesh, so the mesh is not read again.
+    Called in the worker that converted the mesh, so the mesh is not read again
+    (nor checked again when ``report``, made with ``examples=MAX_MARKS``, is given).
     """
     try:
-        preview = render_preview(mesh, size=THUMBNAIL_SIZE, checked=checked, grid=grid)
+        preview = render_preview(
+            mesh, size=THUMBNAIL_SIZE, checked=checked, grid=grid, report=report
+        )
         write_preview(preview, thumbnail_name(output), force=True)
     except IsoconvertError as exc:
         return f"no preview: {exc}"
