@@ -583,7 +583,11 @@ def convert(
     from .convert import convert_levels, level_outputs
     from .label_convert import convert_labels
 
-    labels, wanted = _label_choice(labels, label, single_file, background, level, "convert")
+    labels, wanted = _label_choice(labels, label, single_file, background, level)
+    if not labels and not level:
+        raise IsoconvertError(
+            "convert needs --level (a number, or auto), or --labels for a label volume"
+        )
 
     post = _post_options(
         close,
@@ -710,7 +714,7 @@ def _write_preview(
         print(f"wrote {target}: preview", file=sys.stderr)
 
 
-def _label_choice(labels, label, single_file, background, level, command: str):
+def _label_choice(labels, label, single_file, background, level):
     """Whether the labels of a label volume are wanted, and which (None: all),
     from --labels, --label, --single-file, --background and --level."""
     wanted = _label_list(label)
@@ -721,10 +725,6 @@ def _label_choice(labels, label, single_file, background, level, command: str):
         raise IsoconvertError("--single-file writes the surfaces of --labels; add --labels")
     if labels and level:
         raise IsoconvertError("--labels extracts every label's boundary: leave out --level")
-    if not labels and not level and command == "convert":
-        raise IsoconvertError(
-            "convert needs --level (a number, or auto), or --labels for a label volume"
-        )
     return labels, wanted
 
 
@@ -1003,7 +1003,7 @@ def batch(
     required = parse_requirements(require)
     writer = WRITERS.get(format)
     check_attributes(writer, "--format", normals=normals, labels=single_file)
-    labels, wanted = _label_choice(labels, label, single_file, background, level, "batch")
+    labels, wanted = _label_choice(labels, label, single_file, background, level)
     post = _post_options(
         close,
         largest,

@@ -292,16 +292,7 @@ def read_input(input: str | Path, opts: ConvertOptions) -> Volume:
 
 def _in_memory(volume: Volume) -> Volume:
     """The same volume with its samples read into memory once."""
-    return Volume(
-        volume.data,
-        spacing=volume.spacing,
-        origin=volume.origin,
-        direction=volume.direction,
-        source=volume.source,
-        notes=volume.notes,
-        unit=volume.unit,
-        frame=volume.frame,
-    )
+    return replace(volume, data=volume.data)
 
 
 def _extract_and_write(

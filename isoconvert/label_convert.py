@@ -12,6 +12,7 @@ from .atomic import check_output
 from .convert import ConvertOptions, ConvertResult, read_input
 from .errors import IsoconvertError
 from .extract.tables import DEFAULT_AMBIGUITY
+from .grid import grid_slab_zyx
 from .post.pipeline import post_process
 from .volume import Volume
 from .writers import check_attributes, output_format
@@ -128,7 +129,8 @@ def _check_label_volume(volume: Volume, background: int) -> None:
     if volume.ndim != 3:
         return
     z = volume.shape[2]
-    middle = np.asarray(volume.data[:, :, max(0, z // 2 - 4) : z // 2 + 4])
+    # only the middle layers: a large scan refused here is not read whole first
+    middle = grid_slab_zyx(volume.samples, max(0, z // 2 - 4), min(z, z // 2 + 4)).T
     if not np.issubdtype(middle.dtype, np.integer) and not np.issubdtype(middle.dtype, np.bool_):
         return  # label_surfaces says whether float samples are whole numbers
     inside = pairs = 0
