@@ -62,7 +62,7 @@ def _sample(
 
     def run(zyx: np.ndarray, k0: int, points: np.ndarray, into: np.ndarray) -> None:
         _native.sample_points(
-            kernel_type(zyx, volume.source),
+            zyx,
             k0,
             depth,
             np.ascontiguousarray(points, dtype=np.float64),
@@ -78,7 +78,8 @@ def _sample(
         )
 
     if volume.grid is None:
-        zyx = volume.data.T
+        # converted once (a byte swap or a non-contiguous array is a copy), not per block
+        zyx = kernel_type(volume.data.T, volume.source)
         start = 0
         for block in row_chunks(vertices):
             run(zyx, 0, block, out[start : start + len(block)])
@@ -107,11 +108,12 @@ def _sample(
             continue
         # a cell's corners reach one layer up; a gradient one more each way
         lo, hi = max(0, k - 1), min(depth, k + SLAB_LAYERS + 2)
+        zyx = kernel_type(grid_slab_zyx(volume.samples, lo, hi), volume.source)
         if in_order:
-            run(grid_slab_zyx(volume.samples, lo, hi), lo, vertices[these], out[these])
+            run(zyx, lo, vertices[these], out[these])
             continue
         result = np.empty((b - a, 3) if gradient else b - a, dtype=np.float32)
-        run(grid_slab_zyx(volume.samples, lo, hi), lo, vertices[these], result)
+        run(zyx, lo, vertices[these], result)
         out[these] = result
     return out
 
