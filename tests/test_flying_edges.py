@@ -164,11 +164,12 @@ def test_first_pass_statistics_equal_numpy(dtype):
     zyx[4, 5, 66] = np.inf
     zyx[0, 0, :] = -np.inf
     zyx[2, 3, 10:13] = 0.25
+    zyx[3, 1, 63:67] = 0.25  # past the last whole block of 16 samples too
     scan = _native.scan_rows(zyx, 0.25, True, 0.25, 2)
     finite = zyx[np.isfinite(zyx)]
     assert (scan.min, scan.max) == (finite.min(), finite.max())
     assert scan.nonfinite == (~np.isfinite(zyx)).sum()
-    assert scan.equal == (zyx == np.float64(0.25)).sum() == 3
+    assert scan.equal == (zyx == np.float64(0.25)).sum() == 7
 
 
 def test_all_nonfinite_rows_give_an_empty_range():
