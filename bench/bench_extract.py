@@ -32,6 +32,16 @@ PyMCubes return): the scratch memory and copies a tool needs beyond its input an
 output. glibc's ``MALLOC_MMAP_THRESHOLD_`` is fixed at 128 KiB in those processes so large
 blocks freed earlier cannot hide new ones. Memory that a tool allocates but never touches
 is not resident and not counted.
+
+Memory regime of the timed rounds (``--memory``). With glibc's defaults (``default``),
+a block of 32 MiB or more is mapped afresh for every call and unmapped when freed, so
+its pages are new to the process each time, while smaller blocks are recycled from the
+heap: which outputs and scratch arrays pay for new pages depends on their size, not on
+the tool. ``recycled`` re-runs the benchmark with glibc told to serve every block from
+its heap and keep what is freed (``GLIBC_TUNABLES`` mmap_max=0, a 64 GiB trim
+threshold), so that every tool reuses warm pages alike. The header gives this
+machine's cost of a first touch: on virtual machines that hand freed memory back to
+the host, new pages can cost twenty times more than recycled ones.
 """
 
 from __future__ import annotations
@@ -529,6 +539,7 @@ def measure_memory(cr: CaseRun, tools: list[str], workdir: Path) -> None:
     npy = workdir / f"{cr.case.name}.npy"
     np.save(npy, cr.zyx)
     env = dict(os.environ, MALLOC_MMAP_THRESHOLD_="131072")
+    env.pop("GLIBC_TUNABLES", None)  # --memory recycled would keep freed blocks
     for name in tools:
         if name not in cr.first:
             continue
@@ -606,6 +617,46 @@ def print_case(cr: CaseRun) -> None:
         print(f"  note: {note}")
 
 
+# --------------------------------------------------------------------------- memory
+
+#: glibc malloc settings of ``--memory recycled``: no block is mapped on its own, and
+#: freed memory stays with the process (below 64 GiB), so later blocks reuse it.
+RECYCLE_TUNABLES = "glibc.malloc.mmap_max=0:glibc.malloc.trim_threshold=68719476736"
+MEMORY_REGIMES = {
+    "default": "glibc's defaults: blocks of 32 MiB or more are mapped afresh at every call",
+    "recycled": f"GLIBC_TUNABLES={RECYCLE_TUNABLES}: every block reuses freed pages",
+}
+
+
+def first_touch_costs(megabytes: int = 256) -> str:
+    """A line giving what a first write to new pages costs on this machine.
+
+    Touches one byte per 4 KiB of a new numpy array of ``megabytes`` (numpy asks for
+    huge pages, as it does for the tools' outputs), frees it, does the same with a
+    second new array (which, with ``--memory recycled``, reuses the first one's pages),
+    and then writes the second whole (pages already there: the speed of memory itself).
+    """
+    size = megabytes << 20
+
+    def touch(step: int, array: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+        array = np.empty(size, dtype=np.uint8) if array is None else array
+        start = time.perf_counter()
+        array[::step] = 1
+        return time.perf_counter() - start, array
+
+    t_new, first = touch(4096)
+    del first
+    t_again, second = touch(4096)
+    t_warm, _ = touch(1, second)
+    del second
+    gbps = [size / t / 1e9 for t in (t_new, t_again, t_warm)]
+    return (
+        f"first touch of a new {megabytes} MiB array: {gbps[0]:.1f} GB/s, of a second one "
+        f"right after freeing it: {gbps[1]:.1f} GB/s; writing an array already there: "
+        f"{gbps[2]:.1f} GB/s"
+    )
+
+
 # --------------------------------------------------------------------------- main
 
 
@@ -626,6 +677,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="smoke run: one timed round, and no 512^3 cases unless named with --cases",
     )
     parser.add_argument("--no-memory", action="store_true", help="skip the peak-memory probes")
+    parser.add_argument(
+        "--memory",
+        choices=MEMORY_REGIMES,
+        default="default",
+        help="glibc malloc regime of the timed rounds: default (blocks of 32 MiB or more get "
+        "new pages at every call) or recycled (every block reuses freed pages); see the top "
+        "of this file",
+    )
     # internal: one memory probe, run by measure_memory in a fresh process
     parser.add_argument(
         "--probe", nargs=3, metavar=("TOOL", "NPY", "LEVEL"), help=argparse.SUPPRESS
@@ -657,11 +716,19 @@ def main(argv: list[str] | None = None) -> None:
         tool, npy, level = args.probe
         print(json.dumps(probe(tool, npy, float(level))))
         return
+    if args.memory == "recycled" and os.environ.get("GLIBC_TUNABLES") != RECYCLE_TUNABLES:
+        # glibc reads its tunables at start-up only: run again with them set
+        argv = sys.argv[1:] if argv is None else argv
+        env = dict(os.environ, GLIBC_TUNABLES=RECYCLE_TUNABLES)
+        sys.stdout.flush()
+        os.execve(sys.executable, [sys.executable, __file__, *argv], env)
     print(
         f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; "
         f"{args.repeat} timed round(s) after a warm-up round; VTK STDThread with "
         f"{VTK_THREADS} threads; isoconvert with its default threads"
     )
+    print(f"memory regime: {args.memory} ({MEMORY_REGIMES[args.memory]})")
+    print(first_touch_costs())
     case_runs = []
     skipped = []
     for name in args.cases:
