@@ -3,7 +3,9 @@
 
 #include "signs.hpp"
 
+#include <cstdlib>
 #include <limits>
+#include <string>
 
 namespace iso {
 
@@ -158,6 +160,101 @@ void pack_signs(const T *p, i64 nx, const Threshold<T> &pos, std::uint64_t *out)
   }
 }
 
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define ISO_SCAN_AVX2 1
+#include <immintrin.h>
+
+// The whole first pass over a row of float32 samples (range, NaN/Inf count,
+// equal samples and signs) in one loop of 8-sample AVX2 vectors, for CPUs that
+// have them (chosen at run time): the SSE passes above are limited by
+// instructions, not by memory, and this one takes about half their time.
+// Same results bit for bit: it only compares.
+__attribute__((target("avx2,popcnt"))) void float_row_avx2(const float *p, i64 nx,
+                                                           float threshold, bool count_equal,
+                                                           float equal_to, std::uint64_t *out,
+                                                           Partial &acc) {
+  const __m256 t = _mm256_set1_ps(threshold), e = _mm256_set1_ps(equal_to);
+  __m256 vlo = _mm256_set1_ps(std::numeric_limits<float>::infinity());
+  __m256 vhi = _mm256_set1_ps(-std::numeric_limits<float>::infinity());
+  i64 bad = 0, equal = 0;
+  const i64 full = nx / 64;
+  for (i64 w = 0; w < full; ++w) {
+    std::uint64_t signs = 0, nonfinite = 0, same = 0;
+    for (int k = 0; k < 64; k += 8) {
+      const __m256 v = _mm256_loadu_ps(p + 64 * w + k), d = _mm256_sub_ps(v, v);
+      vlo = _mm256_min_ps(v, vlo);  // the second operand wins when v is NaN
+      vhi = _mm256_max_ps(v, vhi);
+      nonfinite |= std::uint64_t(_mm256_movemask_ps(_mm256_cmp_ps(d, d, _CMP_UNORD_Q))) << k;
+      signs |= std::uint64_t(_mm256_movemask_ps(_mm256_cmp_ps(v, t, _CMP_GE_OQ))) << k;
+      if (count_equal) {
+        same |= std::uint64_t(_mm256_movemask_ps(_mm256_cmp_ps(v, e, _CMP_EQ_OQ))) << k;
+      }
+    }
+    out[w] = signs;
+    bad += __builtin_popcountll(nonfinite);
+    equal += __builtin_popcountll(same);
+  }
+  alignas(32) float l[8], h[8];
+  _mm256_store_ps(l, vlo);
+  _mm256_store_ps(h, vhi);
+  float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+  for (int q = 0; q < 8; ++q) {
+    lo = std::min(lo, l[q]);
+    hi = std::max(hi, h[q]);
+  }
+  std::uint64_t tail = 0;
+  for (i64 k = full * 64; k < nx; ++k) {
+    const float v = p[k];
+    bad += !((v - v) == 0.0f);
+    lo = v < lo ? v : lo;
+    hi = v > hi ? v : hi;
+    equal += count_equal && v == equal_to;
+    tail |= std::uint64_t(v >= threshold) << (k - full * 64);
+  }
+  if (full * 64 < nx) out[full] = tail;
+  if (bad) {  // Inf got into lo/hi: redo the range with finite samples only
+    lo = std::numeric_limits<float>::infinity();
+    hi = -lo;
+    for (i64 i = 0; i < nx; ++i) {
+      if (std::isfinite(p[i])) {
+        lo = std::min(lo, p[i]);
+        hi = std::max(hi, p[i]);
+      }
+    }
+  }
+  acc.nonfinite += bad;
+  acc.equal += equal;
+  acc.min = std::min(acc.min, static_cast<double>(lo));
+  acc.max = std::max(acc.max, static_cast<double>(hi));
+}
+
+// ISOCONVERT_SIMD=sse2 keeps to the baseline passes (the tests compare both).
+bool has_avx2() {
+  static const bool yes = [] {
+    const char *simd = std::getenv("ISOCONVERT_SIMD");
+    return __builtin_cpu_supports("avx2") && !(simd && std::string(simd) == "sse2");
+  }();
+  return yes;
+}
+#endif
+
+// The first pass over one row: range, NaN/Inf and equal counts into `acc`,
+// signs into `out`.
+template <class T>
+void scan_row(const T *p, i64 nx, const Threshold<T> &pos, bool count_equal, T equal_to,
+              std::uint64_t *out, Partial &acc) {
+#if ISO_SCAN_AVX2
+  if constexpr (std::is_same_v<T, float>) {
+    if (has_avx2()) {
+      float_row_avx2(p, nx, pos.value, count_equal, equal_to, out, acc);
+      return;
+    }
+  }
+#endif
+  row_values(p, nx, count_equal, equal_to, acc);
+  if (!pos.none) pack_signs(p, nx, pos, out);
+}
+
 }  // namespace
 
 template <class T>
@@ -181,10 +278,9 @@ void scan_rows(const T *f, i64 nz, i64 ny, i64 nx, double level, bool count_equa
     Partial &acc = parts[w];
     for (i64 r = begin; r < end; ++r) {
       const T *p = f + r * nx;
-      row_values(p, nx, count_equal, eq, acc);
-      if (pos.none) continue;
       std::uint64_t *out = s.bits.data() + r * words;
-      pack_signs(p, nx, pos, out);
+      scan_row(p, nx, pos, count_equal, eq, out, acc);
+      if (pos.none) continue;
       i32 n = 0;
       i64 first = -1, last = -1;
       for (i64 q = 0; q < words; ++q) {

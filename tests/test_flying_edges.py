@@ -9,6 +9,10 @@ the documented vertex and triangle order.
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from conftest import edge_key, read_real_scan, real_scan_names, vtk_flying_edges
@@ -249,3 +253,57 @@ def test_blocks_with_global_origin_give_the_whole_mesh_bit_for_bit(cuts):
     assert np.array_equal(ids[first], whole.edge_ids[order])
     assert verts[first].tobytes() == whole.vertices[order].tobytes()
     assert np.array_equal(np.concatenate(tris), whole.edge_ids[whole.cells])
+
+
+def test_avx2_first_pass_equals_the_baseline_one():
+    """float32 volumes take an AVX2 first pass where the CPU has it; the baseline
+    (SSE2) pass, forced by ISOCONVERT_SIMD=sse2, must give the same statistics and
+    the same mesh, bit for bit, including NaN, +-Inf, samples equal to the level and
+    rows of every length around the 64-sample words."""
+    script = """
+import hashlib, sys
+import os
+import subprocess
+import sys
+
+import numpy as np
+from isoconvert import _native, Volume
+from isoconvert.extract.cubes import marching_cubes
+out = []
+rng = np.random.default_rng(5)
+for nx in (2, 7, 63, 64, 65, 129, 200):
+    zyx = rng.standard_normal((6, 5, nx)).astype(np.float32)
+    zyx[zyx > 2.0] = 0.25
+    s = _native.scan_rows(zyx, 0.25, True, 0.25, 2)
+    out.append((s.min, s.max, s.nonfinite, s.equal))
+    m = marching_cubes(Volume.from_zyx(zyx), 0.25)
+    out.append(hashlib.sha1(m.vertices.tobytes() + m.cells.tobytes()).hexdigest())
+    zyx[1, 2, nx // 2] = np.nan
+    zyx[3, 0, nx - 1] = -np.inf
+    s = _native.scan_rows(zyx, 0.25, True, 0.25, 1)
+    out.append((s.min, s.max, s.nonfinite, s.equal))
+print(repr(out))
+"""
+    runs = []
+    for simd in (None, "sse2"):
+        env = dict(os.environ)
+        env.pop("ISOCONVERT_SIMD", None)
+        if simd:
+            env["ISOCONVERT_SIMD"] = simd
+        proc = subprocess.run(
+            [sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True
+        )
+        runs.append(proc.stdout)
+    assert runs[0] == runs[1]
+    # and the statistics are numpy's
+    rng = np.random.default_rng(5)
+    zyx = rng.standard_normal((6, 5, 65)).astype(np.float32)
+    zyx[zyx > 2.0] = 0.25
+    zyx[1, 2, 32] = np.nan
+    zyx[3, 0, 64] = -np.inf
+    from isoconvert import _native
+
+    s = _native.scan_rows(zyx, 0.25, True, 0.25, 2)
+    finite = zyx[np.isfinite(zyx)]
+    assert (s.min, s.max) == (finite.min(), finite.max())
+    assert (s.nonfinite, s.equal) == (2, int((zyx == np.float32(0.25)).sum()))
