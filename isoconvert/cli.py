@@ -502,7 +502,8 @@ def convert(
     report: Annotated[
         str | None,
         typer.Option(
-            help="Check the mesh and print a report; --report FILE.json writes it as JSON.",
+            help="Check the mesh and print a report; --report FILE.json writes it as JSON, "
+            "--report FILE.txt as the table it prints.",
             rich_help_panel="Checks",
         ),
     ] = None,
@@ -665,7 +666,8 @@ def convert(
         for note in results[0].volume.notes:
             print(f"note: {note}", file=sys.stderr)
     if labels and report not in (None, "-"):
-        reports = [Path(report).with_name(f"{Path(report).stem}_{r.output.stem}.json")
+        name = Path(report)
+        reports = [name.with_name(f"{name.stem}_{r.output.stem}{name.suffix}")
                    for r in results] if len(results) > 1 else [report]  # fmt: skip
     failed = []
     for n, result in enumerate(results):
@@ -805,7 +807,10 @@ def check(
     as_json: Annotated[bool, _flag("--json", help="Print JSON instead of a table.")] = False,
     report: Annotated[
         str | None,
-        typer.Option(help="Also write the report as JSON to FILE.json.", rich_help_panel="Checks"),
+        typer.Option(
+            help="Also write the report to FILE: JSON for FILE.json, else the table it prints.",
+            rich_help_panel="Checks",
+        ),
     ] = None,
     examples: ExamplesOpt = 5,
     force: Annotated[bool, _flag("--force", "-f", help="Overwrite the report file.")] = False,
@@ -883,14 +888,17 @@ def preview(
 
 
 def _emit_report(checked, target, required, *, as_json, force, quiet) -> None:
-    """Print the report (target "-") or write it as JSON; exit 4 when a required check fails."""
+    """Print the report (target "-") or write it to a file (JSON when its name ends in
+    .json, else the printed table); exit 4 when a required check fails."""
     from .report import format_report
 
     if target is not None and target != "-":
         from .atomic import atomic_output
 
+        as_file_json = str(target).lower().endswith(".json")
+        text = json.dumps(checked.to_dict(), indent=2) if as_file_json else format_report(checked)
         with atomic_output(target, force) as fh:
-            fh.write((json.dumps(checked.to_dict(), indent=2) + "\n").encode("utf-8"))
+            fh.write((text + "\n").encode("utf-8"))
     elif target == "-" and not quiet:
         print(json.dumps(checked.to_dict(), indent=2) if as_json else format_report(checked))
     failed = checked.failures(required)
@@ -1455,10 +1463,15 @@ def _print_methods() -> None:
         print(f"  {name:<8} {summary}")
 
 
+#: File names that a bare ``--report`` takes as its value (other names after it are
+#: read as inputs; ``--report=NAME`` takes any).
+REPORT_SUFFIXES = (".json", ".txt")
+
+
 def gather_multi_values(argv: list[str]) -> list[str]:
     """Join ``--shape 256 256 128`` into ``--shape 256,256,128`` (also spacing,
     origin), and give a bare ``--report`` the value "-" (print) unless a
-    ``.json`` file name follows it."""
+    ``.json`` or ``.txt`` file name follows it."""
     out: list[str] = []
     i = 0
     while i < len(argv):
@@ -1466,7 +1479,7 @@ def gather_multi_values(argv: list[str]) -> list[str]:
         out.append(token)
         i += 1
         if token == "--report":
-            if i < len(argv) and argv[i].lower().endswith(".json"):
+            if i < len(argv) and argv[i].lower().endswith(REPORT_SUFFIXES):
                 out.append(argv[i])
                 i += 1
             else:

@@ -365,6 +365,28 @@ def test_report_json_file_and_schema(tmp_path, capsys):
     assert code == 0
 
 
+def test_report_to_a_text_file_is_the_printed_table(tmp_path, capsys):
+    """``--report r.txt`` (no ``=``) writes the table that a bare ``--report`` prints;
+    ``check --report`` likewise, and .json names still get JSON."""
+    torus = str(SAMPLES / "torus.nrrd")
+    out, txt, js = tmp_path / "t.ply", tmp_path / "r.txt", tmp_path / "r.json"
+    assert main(["convert", torus, "-l", "3", "-o", str(out), "--report", str(txt), "-q"]) == 0
+    capsys.readouterr()
+    assert main(["convert", torus, "-l", "3", "-o", str(out), "--force", "--report"]) == 0
+    printed = capsys.readouterr().out
+    table = txt.read_text(encoding="utf-8")
+    assert table.strip() and table.strip() in printed
+    assert "genus" in table.lower() or "euler" in table.lower()
+    with pytest.raises(json.JSONDecodeError):
+        json.loads(table)
+
+    assert main(["check", str(out), "--report", str(tmp_path / "c.txt"), "-q"]) == 0
+    assert main(["check", str(out)]) == 0
+    assert (tmp_path / "c.txt").read_text(encoding="utf-8") == capsys.readouterr().out
+    assert main(["check", str(out), "--report", str(js), "-q"]) == 0
+    assert json.loads(js.read_text())["topology"]["per_component"][0]["genus"] == 1
+
+
 def test_check_prints_a_table_and_rejects_unknown_names(tmp_path, capsys):
     out = tmp_path / "s.ply"
     write_mesh(extract(Volume(ball(16, 5.0)), 0.0), out)
