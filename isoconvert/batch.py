@@ -40,6 +40,13 @@ class Found:
     spec: str  # a file, or a folder of TIFF slices or DICOM files
     relative: Path  # its path relative to the input it was found under
     size: int  # bytes of samples, roughly, for scheduling
+    options: dict = field(default_factory=dict)  # read options it needs (a DICOM series)
+    label: str = ""  # which volume of ``spec`` it is, for the summary ("series 5")
+
+    @property
+    def name(self) -> str:
+        """``spec``, with ``label`` when it has one: the summary's name for it."""
+        return f"{self.spec} ({self.label})" if self.label else self.spec
 
 
 @dataclass
@@ -73,6 +80,10 @@ class Job:
     level: float | str
     options: dict = field(default_factory=dict)  # read options and flip
     estimate: int = 0  # bytes of memory it is expected to need
+    name: str = ""  # the summary's name for the input (``input`` when empty)
+
+    def __post_init__(self) -> None:
+        self.name = self.name or self.input
 
 
 @dataclass
@@ -169,9 +180,9 @@ def discover(
 
 def _once(found: list[Found], skipped: list[Skipped]) -> list[Found]:
     """Each volume once, however many inputs (or ``..`` paths, or links) reach it."""
-    first: dict[str, Found] = {}
+    first: dict[tuple, Found] = {}
     for f in found:
-        key = os.path.realpath(f.spec)
+        key = (os.path.realpath(f.spec), f.options.get("series"))
         if key not in first:
             first[key] = f
         elif f.spec != first[key].spec:
@@ -315,8 +326,8 @@ def _add_files(paths: list[Path], root: Path, found, skipped, images: bool = Fal
             rel = Path(p.name)
         found.append(Found(str(p), rel, _sample_bytes(p)))
     for folder, files in dicom.items():
-        # the DICOM files of a folder are one volume (the reader sorts them into a series,
-        # or says which series there are): the folder, or the file when it is alone
+        # the DICOM files of a folder are one volume per series (the reader sorts the
+        # files of a series into slices): the folder, or the file when it is alone
         spec = files[0] if len(files) == 1 else folder
         try:
             rel = spec.relative_to(root)
@@ -324,7 +335,42 @@ def _add_files(paths: list[Path], root: Path, found, skipped, images: bool = Fal
             rel = Path(spec.name)
         if str(rel) == ".":
             rel = Path(root.resolve().name)
-        found.append(Found(str(spec), rel, sum(p.stat().st_size for p in files)))
+        size = sum(p.stat().st_size for p in files)
+        if len(files) == 1:
+            found.append(Found(str(spec), rel, size))
+        else:
+            _add_dicom_series(folder, rel, size, found, skipped)
+
+
+#: Why a DICOM series of one single-frame file is not converted by a batch.
+LONE_SLICE_REASON = "a DICOM series of one slice (a localizer?); convert it alone if wanted"
+
+
+def _add_dicom_series(folder: Path, rel: Path, size: int, found, skipped) -> None:
+    """One volume per image series among a folder's DICOM files, as dcm2niix does:
+    ``NAME_seriesN`` (N its SeriesNumber; its UID where numbers are missing or repeat)."""
+    try:
+        from .readers.dicom import folder_series
+
+        series = folder_series(folder)
+    except IsoconvertError:  # pydicom missing: the job says how to install it
+        series = []
+    if len(series) < 2:
+        found.append(Found(str(folder), rel, size))
+        return
+    numbers = [s.number for s in series]
+    by_number = None not in numbers and len(set(numbers)) == len(numbers)
+    total = sum(s.files for s in series)
+    for s in series:
+        # no dots in the name: the part after one would be taken for a file suffix
+        suffix = f"series{s.number}" if by_number else (s.uid or "no-uid").replace(".", "-")
+        shown = f"series {s.number}" if by_number else f"series {s.uid}"
+        if s.frames == 1:
+            skipped.append(Skipped(f"{folder} ({shown})", LONE_SLICE_REASON))
+            continue
+        part = size * s.files // total
+        name = rel.with_name(f"{rel.name}_{suffix}")
+        found.append(Found(str(folder), name, part, {"series": s.uid}, shown))
 
 
 def _is_2d_image(path: Path, reader: str) -> bool:
@@ -567,6 +613,7 @@ def plan(
         job_options = {
             **(options or {}),
             **((raw_options or {}) if is_raw else {}),
+            **f.options,
             **(rule.options if rule else {}),
         }
         if rule and rule.level is not None:
@@ -598,10 +645,10 @@ def _add_job(
     if job_level is None:
         done.append(
             Outcome(
-                f.spec,
+                f.name,
                 str(output),
                 "failed",
-                message=f"{f.spec}: no level; give --level or a mapping entry",
+                message=f"{f.name}: no level; give --level or a mapping entry",
             )
         )
         return
@@ -610,12 +657,12 @@ def _add_job(
         shown = output.with_name(f"{output.stem}_label*{output.suffix}")
         exists = any(output.parent.glob(f"{globlib.escape(output.stem)}_label*{output.suffix}"))
     if exists and skip_existing:
-        done.append(Outcome(f.spec, str(output), "skipped", message="output exists"))
+        done.append(Outcome(f.name, str(output), "skipped", message="output exists"))
         return
     if exists and not force:
         done.append(
             Outcome(
-                f.spec,
+                f.name,
                 str(output),
                 "failed",
                 message=f"{shown}: already exists; pass --force or --skip-existing",
@@ -623,7 +670,7 @@ def _add_job(
         )
         return
     estimate = MEMORY_FACTOR * f.size + MEMORY_BASE
-    jobs.append(Job(f.spec, str(output), job_level, job_options, estimate))
+    jobs.append(Job(f.spec, str(output), job_level, job_options, estimate, f.name))
 
 
 def _output_name(relative: Path, suffix: str) -> Path:
@@ -770,7 +817,7 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
 
     def failed(message: str) -> Outcome:
         return Outcome(
-            job.input, job.output, "failed", seconds=time.perf_counter() - start, message=message
+            job.name, job.output, "failed", seconds=time.perf_counter() - start, message=message
         )
 
     require = list(settings.require)
@@ -791,12 +838,12 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
     except IsoconvertError as exc:
         return failed(str(exc))
     except MemoryError:
-        return failed(f"{job.input}: out of memory; convert it alone or lower --jobs")
+        return failed(f"{job.name}: out of memory; convert it alone or lower --jobs")
     except Exception as exc:  # a bug: report it for this file, keep the others going
-        return failed(f"{job.input}: internal error {type(exc).__name__}: {exc}")
+        return failed(f"{job.name}: internal error {type(exc).__name__}: {exc}")
     labels = settings.options.labels is not None
     outcome = Outcome(
-        job.input,
+        job.name,
         job.output,
         "ok",
         level=None if labels else float(results[0].mesh.info["level"]),
@@ -917,7 +964,7 @@ def run_jobs(
                             try:
                                 made.extend(make_folders(Path(job.output).parent))
                             except IsoconvertError as exc:
-                                done(Outcome(job.input, job.output, "failed", message=str(exc)))
+                                done(Outcome(job.name, job.output, "failed", message=str(exc)))
                                 continue
                             running[pool.submit(_run_one_dict, asdict(job), settings)] = job
                             used += job.estimate
@@ -932,10 +979,10 @@ def run_jobs(
                                 raise
                             except Exception as exc:
                                 result = Outcome(
-                                    job.input,
+                                    job.name,
                                     job.output,
                                     "failed",
-                                    message=f"{job.input}: {type(exc).__name__}: {exc}",
+                                    message=f"{job.name}: {type(exc).__name__}: {exc}",
                                 )
                             del running[future]
                             used -= job.estimate
@@ -949,7 +996,7 @@ def run_jobs(
                     done(_run_alone(job, settings, context))
             except KeyboardInterrupt:
                 for job in [*running.values(), *pending]:
-                    done(Outcome(job.input, job.output, "interrupted", message="interrupted"))
+                    done(Outcome(job.name, job.output, "interrupted", message="interrupted"))
                 raise
     finally:
         tidy([])
@@ -965,10 +1012,10 @@ def _run_alone(job: Job, settings: BatchSettings, context) -> Outcome:
             return Outcome(**pool.submit(_run_one_dict, asdict(job), settings).result())
     except BrokenProcessPool:
         return Outcome(
-            job.input,
+            job.name,
             job.output,
             "failed",
-            message=f"{job.input}: the worker process died (out of memory?); "
+            message=f"{job.name}: the worker process died (out of memory?); "
             "convert it alone or lower --jobs",
         )
 

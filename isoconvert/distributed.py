@@ -718,7 +718,7 @@ def run_on_cluster(
                 try:
                     made.extend(batch.make_folders(Path(sent.output).parent))
                 except IsoconvertError as exc:
-                    done(batch.Outcome(job.input, job.output, "failed", message=str(exc)))
+                    done(batch.Outcome(job.name, job.output, "failed", message=str(exc)))
                     continue
                 future = client.submit(
                     batch.run_one,
@@ -735,7 +735,7 @@ def run_on_cluster(
                     key = watch.next_key()
                 except IsoconvertError as exc:  # no worker to run them
                     for _, job, _, _ in running.values():
-                        done(batch.Outcome(job.input, job.output, "failed", message=str(exc)))
+                        done(batch.Outcome(job.name, job.output, "failed", message=str(exc)))
                     break
                 if key not in running:
                     continue
@@ -748,7 +748,7 @@ def run_on_cluster(
         except KeyboardInterrupt:
             _cancel(client, [future for future, *_ in running.values()])
             for job in [*(job for _, job, _, _ in running.values()), *waiting]:
-                done(batch.Outcome(job.input, job.output, "interrupted", message="interrupted"))
+                done(batch.Outcome(job.name, job.output, "interrupted", message="interrupted"))
             running.clear()
             raise
     finally:
@@ -764,7 +764,7 @@ def _file_outcome(future, job: Job, sent: Job, start: float, address: str) -> Ou
 
     def failed(message: str) -> Outcome:
         return Outcome(
-            job.input, job.output, "failed", seconds=time.perf_counter() - start, message=message
+            job.name, job.output, "failed", seconds=time.perf_counter() - start, message=message
         )
 
     try:
@@ -772,14 +772,14 @@ def _file_outcome(future, job: Job, sent: Job, start: float, address: str) -> Ou
     except IsoconvertError as exc:
         return failed(str(exc))
     except Exception as exc:  # a bug: report it for this file, keep the others going
-        return failed(f"{job.input}: internal error {type(exc).__name__}: {one_line(exc)}")
+        return failed(f"{job.name}: internal error {type(exc).__name__}: {one_line(exc)}")
     if result is _DIED:
         return failed(
-            f"{job.input}: the Dask worker converting it died (out of memory?), also when "
+            f"{job.name}: the Dask worker converting it died (out of memory?), also when "
             "retried on other workers; give the workers more memory or convert it alone"
         )
     result.message = result.message.replace(sent.input, job.input).replace(sent.output, job.output)
-    result.input, result.output = job.input, job.output
+    result.input, result.output = job.name, job.output
     return result
 
 

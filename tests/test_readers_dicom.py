@@ -31,6 +31,7 @@ def write_slice(
     description="synthetic",
     spacing=(0.5, 0.25),
     bits=16,
+    number=None,
 ):
     meta = FileMetaDataset()
     meta.MediaStorageSOPClassUID = CTImageStorage
@@ -42,6 +43,8 @@ def write_slice(
     ds.SOPInstanceUID = meta.MediaStorageSOPInstanceUID
     ds.SeriesInstanceUID = series
     ds.SeriesDescription = description
+    if number is not None:
+        ds.SeriesNumber = number
     ds.InstanceNumber = instance
     ds.ImagePositionPatient = [float(v) for v in position]
     ds.ImageOrientationPatient = [float(v) for v in iop]

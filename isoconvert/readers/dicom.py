@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import glob
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -96,6 +97,61 @@ def _count(items: list) -> str:
     return f"{len(items)} files, {len(frames)} of them multi-frame"
 
 
+@dataclass(frozen=True)
+class DicomSeries:
+    """One image series among the DICOM files of a folder (see :func:`folder_series`)."""
+
+    uid: str  # SeriesInstanceUID ("" when the files have none)
+    number: int | None  # SeriesNumber, when the files give one
+    description: str  # SeriesDescription, or ""
+    files: int  # DICOM image files
+    frames: int  # images: the files' frames (a slice each for single-frame files)
+
+
+def _image_headers(files: list[Path]) -> tuple[list[tuple[Path, object]], list[str]]:
+    """The (file, dataset) pairs of the DICOM images among ``files``, and the names
+    of the others."""
+    headers, skipped = [], []
+    for f in files:
+        ds = _header(f)
+        if ds is None or "Rows" not in ds:
+            skipped.append(f.name)
+            continue
+        headers.append((f, ds))
+    return headers, skipped
+
+
+def _by_series(headers: list[tuple[Path, object]]) -> dict[str, list]:
+    """``headers`` grouped by SeriesInstanceUID, in the order of their first files."""
+    series: dict[str, list] = {}
+    for f, ds in headers:
+        series.setdefault(str(ds.get("SeriesInstanceUID", "")), []).append((f, ds))
+    return series
+
+
+def folder_series(folder: Path) -> list[DicomSeries]:
+    """The image series of the DICOM files directly in ``folder``, read from their
+    headers only, by series number (then UID).
+
+    Raises
+    ------
+    FormatError
+        pydicom is not installed.
+    """
+    files = sorted(p for p in Path(folder).iterdir() if p.is_file())
+    found = []
+    for uid, items in _by_series(_image_headers(files)[0]).items():
+        ds = items[0][1]
+        try:
+            number = int(ds.get("SeriesNumber"))
+        except (TypeError, ValueError):
+            number = None
+        frames = sum(int(d.get("NumberOfFrames", 1) or 1) for _, d in items)
+        description = str(ds.get("SeriesDescription", "") or "")
+        found.append(DicomSeries(uid, number, description, len(items), frames))
+    return sorted(found, key=lambda s: (s.number is None, s.number or 0, s.uid))
+
+
 def read_dicom(path: Path, options: ReadOptions) -> Volume:
     """Read a DICOM series (a folder of slices, or one file of it) or a multi-frame file.
 
@@ -144,14 +200,7 @@ def read_dicom(path: Path, options: ReadOptions) -> Volume:
         files = sorted(p for p in path.parent.iterdir() if p.is_file())
         where = f"in {path.parent}"
     notes: list[str] = []
-    headers = []
-    skipped = []
-    for f in files:
-        ds = _header(f)
-        if ds is None or "Rows" not in ds:
-            skipped.append(f.name)
-            continue
-        headers.append((f, ds))
+    headers, skipped = _image_headers(files)
     if skipped:
         more = f" and {len(skipped) - 3} more" if len(skipped) > 3 else ""
         shown = ", ".join(skipped[:3]) + more
@@ -162,9 +211,7 @@ def read_dicom(path: Path, options: ReadOptions) -> Volume:
             "--input-format"
         )
 
-    series: dict[str, list] = {}
-    for f, ds in headers:
-        series.setdefault(str(ds.get("SeriesInstanceUID", "")), []).append((f, ds))
+    series = _by_series(headers)
     wanted = options.series
     if wanted is None and path.is_file():
         # one file given: its series
