@@ -20,7 +20,7 @@ from isoconvert.errors import FormatError
 from isoconvert.extract.blocks import Blocks
 from isoconvert.writers import WRITERS
 from isoconvert.writers.header import parse_grid_comment
-from isoconvert.writers.threemf import CORE_NAMESPACE, MODEL_PART
+from isoconvert.writers.threemf import CORE_NAMESPACE, MODEL_PART, UNITS_3MF
 
 NS = {"m": CORE_NAMESPACE}
 
@@ -62,7 +62,7 @@ def read_3mf(path) -> tuple[ElementTree.Element, np.ndarray, np.ndarray]:
         rels = ElementTree.fromstring(package.read("_rels/.rels"))
         assert [r.get("Target") for r in rels] == ["/" + MODEL_PART]
         model = ElementTree.fromstring(package.read(MODEL_PART))
-    assert model.tag == f"{{{CORE_NAMESPACE}}}model" and model.get("unit") == "millimeter"
+    assert model.tag == f"{{{CORE_NAMESPACE}}}model" and model.get("unit") in UNITS_3MF.values()
     vertices = np.array(
         [
             [float(v.get(a)) for a in "xyz"]
@@ -251,3 +251,61 @@ def test_the_cli_converts_and_lists_them(tmp_path, capsys, suffix):
 def test_ascii_changes_nothing(tmp_path, sphere, suffix):
     a = write_mesh(sphere, tmp_path / f"a{suffix}").read_bytes()
     assert write_mesh(sphere, tmp_path / f"b{suffix}", ascii=True).read_bytes() == a
+
+
+@pytest.mark.parametrize(("unit", "meters"), [("mm", 1e-3), ("µm", 1e-6), ("m", 1.0)])
+def test_glb_is_in_meters_where_the_unit_is_known(tmp_path, sphere, unit, meters):
+    """glTF means meters: the node scales the volume's unit to them, so trimesh (which
+    applies node transforms) sees meters, and isoconvert reads the volume's units back."""
+    mesh = Mesh(sphere.vertices, sphere.cells, info={**sphere.info, "unit": unit})
+    path = write_mesh(mesh, tmp_path / "s.glb")
+    gltf, _, _ = glb_parts(path)
+    ours = gltf["asset"]["extras"]["isoconvert"]
+    assert (ours["unit"], ours["meters_per_unit"]) == (unit, meters)
+    assert gltf["nodes"][0].get("scale", [1.0, 1.0, 1.0]) == [meters] * 3
+    seen = trimesh.load(path, force="mesh", process=False)
+    np.testing.assert_allclose(seen.vertices, float32(sphere.vertices) * meters, rtol=1e-6)
+    from isoconvert.meshfile import read_mesh
+
+    back = read_mesh(path)
+    np.testing.assert_array_equal(back.vertices, float32(sphere.vertices))
+    assert back.info["stored_precision"] == "float32"
+
+
+def test_glb_without_a_unit_is_not_scaled(tmp_path, sphere):
+    assert sphere.info.get("unit") is None
+    gltf, _, _ = glb_parts(write_mesh(sphere, tmp_path / "s.glb"))
+    assert "scale" not in gltf["nodes"][0]
+    assert "not known" in gltf["asset"]["extras"]["isoconvert"]["unit"]
+
+
+@pytest.mark.parametrize(
+    ("unit", "model_unit"),
+    [("mm", "millimeter"), ("µm", "micron"), ("micrometer", "micron"), ("cm", "centimeter"),
+     (None, "millimeter"), ("nm", "millimeter")],
+)  # fmt: skip
+def test_3mf_states_the_volume_unit(tmp_path, sphere, unit, model_unit):
+    mesh = Mesh(sphere.vertices, sphere.cells, info={**sphere.info, "unit": unit})
+    model, vertices, _ = read_3mf(write_mesh(mesh, tmp_path / "s.3mf"))
+    assert model.get("unit") == model_unit
+    np.testing.assert_array_equal(vertices.astype(np.float32), float32(sphere.vertices))
+    note = next(m.text for m in model.findall("m:metadata", NS) if "coordinates" in m.get("name"))
+    assert ("not converted" in note) == (model_unit == "millimeter" and unit != "mm")
+
+
+def test_real_scans_carry_their_units_to_glb_and_3mf(tmp_path):
+    """A DICOM CT (mm) and a confocal TIFF stack (µm), through the command line."""
+    from conftest import dataset
+
+    cases = [("ct_chest_LIDC-IDRI-0314_dicom", "1300.5", 1e-3, "millimeter"),
+             ("XYZ_organ-of-corti_confocal.tif", "auto", 1e-6, "micron")]  # fmt: skip
+    for name, level, meters, model_unit in cases:
+        source = dataset(name)
+        glb, tmf = tmp_path / f"{name}.glb", tmp_path / f"{name}.3mf"
+        for out in (glb, tmf):
+            assert main(["convert", str(source), "-l", level, "-o", str(out), "-q"]) == 0
+        gltf, _, _ = glb_parts(glb)
+        assert gltf["nodes"][0]["scale"] == [meters] * 3
+        assert read_3mf(tmf)[0].get("unit") == model_unit
+        # the check of the GLB judges the holes against the grid in the volume's units
+        assert main(["check", str(glb), "-q"]) == main(["check", str(tmf), "-q"])

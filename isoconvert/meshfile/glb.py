@@ -49,10 +49,19 @@ def _read_glb(path: Path) -> Mesh:
         raise _Unreadable("its JSON chunk is not a glTF object")
     binary = next((chunk for kind, chunk in chunks[1:] if kind == 0x004E4942), None)
     buffers = [_gltf_buffer(b, binary) for b in gltf.get("buffers", [])]
+    extras = gltf.get("asset", {}).get("extras", {})
+    ours = extras.get("isoconvert") if isinstance(extras, dict) else None
+    # isoconvert's files scale the volume's units to meters in their node: back to
+    # the volume's units, where the grid record and the other formats have the mesh
+    # (divided, not multiplied by an inverse, so that their own scale gives 1 exactly)
+    per_unit = 1.0
+    if isinstance(ours, dict) and _positive(ours.get("meters_per_unit")):
+        per_unit = float(ours["meters_per_unit"])
     vertices_list, cells_list, kinds = [], [], set()
     n = 0
     transformed = False
     for mesh_index, matrix in _gltf_instances(gltf):
+        matrix[:3] /= per_unit
         mesh = gltf["meshes"][mesh_index]
         for primitive in mesh.get("primitives", []):
             mode = primitive.get("mode", _GLTF_TRIANGLES)
@@ -92,8 +101,6 @@ def _read_glb(path: Path) -> Mesh:
         # float32 positions placed by a transform are float64 values
         "stored_precision": "float64" if transformed else "float32",
     }
-    extras = gltf.get("asset", {}).get("extras", {})
-    ours = extras.get("isoconvert") if isinstance(extras, dict) else None
     if isinstance(ours, dict):
         from ..geometry import normalized_grid
 
@@ -101,6 +108,11 @@ def _read_glb(path: Path) -> Mesh:
         if grid is not None:
             info["grid"] = grid
     return Mesh(np.concatenate(vertices_list), np.concatenate(cells_list), info=info)
+
+
+def _positive(value) -> bool:
+    """Whether ``value`` is a finite number above 0."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and 0 < value < np.inf
 
 
 def _gltf_buffer(buffer: dict, binary: bytes | None) -> bytes:

@@ -129,7 +129,7 @@ for _writer in (
     Writer(
         "glb",
         "glTF 2.0 binary (web viewers), indexed triangles, float32; world coordinates "
-        "as they are (no swap to +Y up)",
+        "(no swap to +Y up), scaled to meters by the node where the unit is known",
         (".glb",),
         LazyFunction("isoconvert.writers.glb:write_glb"),
         False,
@@ -141,7 +141,8 @@ for _writer in (
     ),
     Writer(
         "3mf",
-        "3MF (3D printing), indexed triangles, float32; unit millimeter, not converted",
+        "3MF (3D printing), indexed triangles, float32; in the volume's unit (millimeter "
+        "when not known), never converted",
         (".3mf",),
         LazyFunction("isoconvert.writers.threemf:write_3mf"),
         False,

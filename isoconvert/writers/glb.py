@@ -15,10 +15,13 @@ length follows from V and C, so the JSON is written first and the arrays are
 streamed block by block after it (a first pass over the vertices finds the
 accessor's min and max).
 
-glTF is float32 only and its convention is +Y up, meters: isoconvert writes the
-volume's world coordinates as they are (no axis swap, no unit conversion) and
-says so in ``asset.extras["isoconvert"]``, beside the provenance lines and the
-grid record.
+glTF is float32 only and its convention is +Y up, meters. The positions are the
+volume's world coordinates as they are (no axis swap); where the volume's unit
+is known (mm from DICOM and NIfTI, NRRD's space units, µm from microscopy
+files), the node's ``scale`` converts them to meters (0.001 for mm), as glTF
+viewers expect, and ``asset.extras["isoconvert"]`` records the unit and the
+factor (isoconvert's reader undoes it). Without a known unit nothing is scaled,
+and the extras say so, beside the provenance lines and the grid record.
 """
 
 from __future__ import annotations
@@ -32,13 +35,14 @@ import numpy as np
 from ..errors import FormatError
 from ..geometry import normalized_grid
 from ..mesh import Mesh
+from ..units import meters_per_unit
 from .chunks import row_chunks
 from .header import escape_comment, provenance
 
 #: What ``asset.extras["isoconvert"]["frame"]`` says about the coordinates.
 FRAME_NOTE = (
-    "vertex coordinates are the volume's world coordinates as they are: no swap to "
-    "glTF's +Y up and no conversion to meters"
+    "vertex coordinates are the volume's world coordinates as they are (no swap to "
+    "glTF's +Y up); the node's scale converts them to meters where their unit is known"
 )
 _MAGIC, _VERSION = 0x46546C67, 2  # "glTF"
 _JSON, _BIN = 0x4E4F534A, 0x004E4942  # "JSON", "BIN\0"
@@ -50,12 +54,20 @@ _MAX_BYTES = 2**32 - 1
 
 
 def _extras(mesh: Mesh) -> dict:
-    """Provenance lines (escaped as in PLY/OBJ headers), the grid and the frame note."""
+    """Provenance lines (escaped as in PLY/OBJ headers), the grid, the frame note,
+    and the unit with its meters (``meters_per_unit``, the node's scale) when known."""
     extras: dict = {"provenance": [escape_comment(line) for line in provenance(mesh)]}
     grid = normalized_grid(mesh.info.get("grid"))
     if grid is not None:
         extras["grid"] = grid
     extras["frame"] = FRAME_NOTE
+    unit = mesh.info.get("unit")
+    scale = meters_per_unit(unit)
+    if scale is None:
+        extras["unit"] = "not known: coordinates not scaled to meters"
+    else:
+        extras["unit"] = unit
+        extras["meters_per_unit"] = scale
     return {"isoconvert": extras}
 
 
@@ -74,6 +86,15 @@ def _bounds(vertices: np.ndarray) -> tuple[list[float], list[float]]:
             "write PLY or OBJ, or move the origin nearer the mesh"
         )
     return [float(v) for v in low], [float(v) for v in high]
+
+
+def _node(mesh: Mesh) -> dict:
+    """The one node: the mesh, scaled from the volume's unit to meters when known."""
+    node: dict = {"mesh": 0, "name": "isosurface"}
+    scale = meters_per_unit(mesh.info.get("unit"))
+    if scale is not None and scale != 1.0:
+        node["scale"] = [scale, scale, scale]
+    return node
 
 
 def gltf_json(mesh: Mesh) -> dict:
@@ -119,7 +140,7 @@ def gltf_json(mesh: Mesh) -> dict:
     gltf.update(
         {
             "scenes": [{"nodes": [0]}],
-            "nodes": [{"mesh": 0, "name": "isosurface"}],
+            "nodes": [_node(mesh)],
             "meshes": [
                 {
                     "name": "isosurface",
@@ -144,8 +165,9 @@ def write_glb(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
     ``asset.generator`` is ``isoconvert VERSION``; ``asset.extras["isoconvert"]``
     holds ``provenance`` (the lines PLY and OBJ headers get, escaped the same
     way), ``grid`` (the grid record, a JSON object) and ``frame`` (the
-    coordinates are the volume's world coordinates, not swapped to glTF's +Y up
-    nor converted to meters). Written block by block.
+    coordinates are the volume's world coordinates, not swapped to glTF's +Y up),
+    and, where the volume's unit is known, ``unit`` and ``meters_per_unit``, which
+    is also the node's ``scale``. Written block by block.
 
     Parameters
     ----------

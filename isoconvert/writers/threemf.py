@@ -16,10 +16,12 @@ A ZIP package (deflated) of three parts::
                              </model>
 
 Coordinates are written with 9 significant digits (the float32 values come
-back exactly). The unit is "millimeter" and nothing is converted: a volume's
-spacing is usually in mm. The model XML is streamed into the ZIP entry block
-by block; every entry has the same fixed time stamp (1980-01-01), so the same
-mesh always gives the same bytes.
+back exactly), in the volume's world unit, never converted: the model's
+``unit`` is that unit where 3MF has a name for it (micron, millimeter,
+centimeter, inch, foot, meter), else "millimeter", what a volume's spacing
+usually is, and the metadata says the unit was not known. The model XML is
+streamed into the ZIP entry block by block; every entry has the same fixed time
+stamp (1980-01-01), so the same mesh always gives the same bytes.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import numpy as np
 
 from ..errors import FormatError
 from ..mesh import Mesh
+from ..units import meters_per_unit
 from .chunks import row_chunks
 from .header import escape_comment, grid_comment, provenance
 from .text import write_rows
@@ -64,6 +67,21 @@ _VERTEX = '<vertex x="%.9g" y="%.9g" z="%.9g"/>\n'
 _TRIANGLE = '<triangle v1="%d" v2="%d" v3="%d"/>\n'
 
 
+#: 3MF's unit names, by meters per unit.
+UNITS_3MF = {1e-6: "micron", 1e-3: "millimeter", 1e-2: "centimeter", 0.0254: "inch",
+             0.3048: "foot", 1.0: "meter"}  # fmt: skip
+
+
+def model_unit(mesh: Mesh) -> tuple[str, str]:
+    """The model's ``unit`` attribute for ``mesh``, and what the metadata says of it."""
+    unit = mesh.info.get("unit")
+    name = UNITS_3MF.get(meters_per_unit(unit))
+    if name is not None:
+        return name, f"the volume's world coordinates, in its unit ({unit})"
+    why = f"its unit {unit!r} has no 3MF name" if unit else "its unit is not known"
+    return "millimeter", f"the volume's world coordinates as they are ({why}): not converted"
+
+
 def _metadata(mesh: Mesh) -> list[str]:
     from .. import __version__
 
@@ -75,12 +93,7 @@ def _metadata(mesh: Mesh) -> list[str]:
     grid = grid_comment(mesh.info.get("grid"))
     if grid is not None:
         items.append(("isoconvert:grid", grid))
-    items.append(
-        (
-            "isoconvert:coordinates",
-            "the volume's world coordinates as they are; units not converted",
-        )
-    )
+    items.append(("isoconvert:coordinates", model_unit(mesh)[1]))
     return [f' <metadata name="{name}">{escape(value)}</metadata>' for name, value in items]
 
 
@@ -88,7 +101,7 @@ def _model_head(mesh: Mesh) -> str:
     return "\n".join(
         [
             '<?xml version="1.0" encoding="UTF-8"?>',
-            f'<model unit="millimeter" xml:lang="en-US" xmlns="{CORE_NAMESPACE}" '
+            f'<model unit="{model_unit(mesh)[0]}" xml:lang="en-US" xmlns="{CORE_NAMESPACE}" '
             f'xmlns:isoconvert="{ISOCONVERT_NAMESPACE}">',
             *_metadata(mesh),
             " <resources>",
