@@ -782,19 +782,23 @@ def _report_result(result, target, required, examples, force, quiet) -> list[str
 
     grid = result.mesh.info.get("grid")
     checked = check_mesh(result.written, examples=examples, source=str(result.output), grid=grid)
-    if result.extracted is not None and not quiet:
+    changed = None
+    if result.extracted is not None and not (quiet and target in (None, "-")):
         from .post.pipeline import changes
         from .writers.stored import stored_mesh
 
         # both as the file stores them (STL: three vertices per triangle)
         extracted = stored_mesh(result.extracted, result.format, result.ascii)
         before = check_mesh(extracted, examples=0, grid=grid).to_dict()
-        lines = changes(before, checked.to_dict()) or ["nothing the report measures"]
-        print(f"{result.output}: post-processing changed:", file=sys.stderr)
-        for line in lines:
-            print(f"  {line}", file=sys.stderr)
+        changed = changes(before, checked.to_dict()) or ["nothing the report measures"]
+        if not quiet:
+            print(f"{result.output}: post-processing changed:", file=sys.stderr)
+            for line in changed:
+                print(f"  {line}", file=sys.stderr)
     try:
-        _emit_report(checked, target, required, as_json=False, force=force, quiet=quiet)
+        _emit_report(
+            checked, target, required, as_json=False, force=force, quiet=quiet, changed=changed
+        )
     except typer.Exit:
         return checked.failures(required)
     return []
@@ -887,16 +891,24 @@ def preview(
         print(f"wrote {output}: {what} marked ({time.perf_counter() - start:.2f} s)")
 
 
-def _emit_report(checked, target, required, *, as_json, force, quiet) -> None:
+def _emit_report(checked, target, required, *, as_json, force, quiet, changed=None) -> None:
     """Print the report (target "-") or write it to a file (JSON when its name ends in
-    .json, else the printed table); exit 4 when a required check fails."""
+    .json, else the printed table), with what post-processing ``changed`` (lines) in
+    the file; exit 4 when a required check fails."""
     from .report import format_report
 
     if target is not None and target != "-":
         from .atomic import atomic_output
 
-        as_file_json = str(target).lower().endswith(".json")
-        text = json.dumps(checked.to_dict(), indent=2) if as_file_json else format_report(checked)
+        if str(target).lower().endswith(".json"):
+            data = checked.to_dict()
+            if changed is not None:
+                data["post_processing"] = {"changed": list(changed)}
+            text = json.dumps(data, indent=2)
+        else:
+            text = format_report(checked)
+            if changed is not None:
+                text += "\n\npost-processing changed:\n" + "\n".join(f"  {c}" for c in changed)
         with atomic_output(target, force) as fh:
             fh.write((text + "\n").encode("utf-8"))
     elif target == "-" and not quiet:
@@ -1470,15 +1482,17 @@ REPORT_SUFFIXES = (".json", ".txt")
 
 def gather_multi_values(argv: list[str]) -> list[str]:
     """Join ``--shape 256 256 128`` into ``--shape 256,256,128`` (also spacing,
-    origin), and give a bare ``--report`` the value "-" (print) unless a
-    ``.json`` or ``.txt`` file name follows it."""
+    origin), and give convert's bare ``--report`` the value "-" (print) unless a
+    ``.json`` or ``.txt`` file name follows it (check's ``--report`` always takes
+    the next word)."""
     out: list[str] = []
+    command = next((a for a in argv if not a.startswith("-")), None)
     i = 0
     while i < len(argv):
         token = argv[i]
         out.append(token)
         i += 1
-        if token == "--report":
+        if token == "--report" and command == "convert":
             if i < len(argv) and argv[i].lower().endswith(REPORT_SUFFIXES):
                 out.append(argv[i])
                 i += 1

@@ -147,6 +147,23 @@ def test_require_applies_to_the_final_mesh(tmp_path, capsys):
     assert "post-processing changed:" in captured.err
     assert "watertight: FAIL -> PASS" in captured.err
     assert "boundary edges on the grid:" in captured.err
+    # a report file keeps what post-processing changed, also with --quiet
+    import json
+
+    import jsonschema
+
+    from isoconvert.report import SCHEMA_PATH
+
+    out = tmp_path / "closed2.ply"
+    for report in (tmp_path / "r.json", tmp_path / "r.txt"):
+        assert main([*args, "-o", str(out), "--close", "--report", str(report), "-q"]) == 0
+    data = json.loads((tmp_path / "r.json").read_text())
+    jsonschema.validate(data, json.loads(SCHEMA_PATH.read_text()))
+    assert "watertight: FAIL -> PASS" in data["post_processing"]["changed"]
+    text = (tmp_path / "r.txt").read_text(encoding="utf-8")
+    assert "post-processing changed:\n" in text and "  watertight: FAIL -> PASS" in text
+    assert main(["check", str(out), "--report", str(tmp_path / "c.json"), "-q"]) == 0
+    assert "post_processing" not in json.loads((tmp_path / "c.json").read_text())
 
 
 def test_largest_and_min_size_from_the_command_line(tmp_path):

@@ -365,6 +365,12 @@ def test_report_json_file_and_schema(tmp_path, capsys):
     assert code == 0
 
 
+def table_of_check(path, capsys) -> str:
+    capsys.readouterr()
+    assert main(["check", str(path)]) == 0
+    return capsys.readouterr().out
+
+
 def test_report_to_a_text_file_is_the_printed_table(tmp_path, capsys):
     """``--report r.txt`` (no ``=``) writes the table that a bare ``--report`` prints;
     ``check --report`` likewise, and .json names still get JSON."""
@@ -383,6 +389,9 @@ def test_report_to_a_text_file_is_the_printed_table(tmp_path, capsys):
     assert main(["check", str(out), "--report", str(tmp_path / "c.txt"), "-q"]) == 0
     assert main(["check", str(out)]) == 0
     assert (tmp_path / "c.txt").read_text(encoding="utf-8") == capsys.readouterr().out
+    # check's --report always takes the next word, whatever its suffix
+    assert main(["check", str(out), "--report", str(tmp_path / "c.md"), "-q"]) == 0
+    assert (tmp_path / "c.md").read_text(encoding="utf-8") == table_of_check(out, capsys)
     assert main(["check", str(out), "--report", str(js), "-q"]) == 0
     assert json.loads(js.read_text())["topology"]["per_component"][0]["genus"] == 1
 
