@@ -343,7 +343,7 @@ def _add_files(paths: list[Path], root: Path, found, skipped, images: bool = Fal
 
 
 #: Why a DICOM series of one single-frame file is not converted by a batch.
-LONE_SLICE_REASON = "a DICOM series of one slice (a localizer?); convert it alone if wanted"
+LONE_SLICE_REASON = "a DICOM series of one slice (a localizer?): an image, not a volume"
 
 
 def _add_dicom_series(folder: Path, rel: Path, size: int, found, skipped) -> None:

@@ -43,7 +43,10 @@ def test_each_series_is_one_mesh(tmp_path, capsys):
     assert rows[f"{folder} (series 3)"]["status"] == "ok"
     assert rows[f"{folder} (series 7)"]["status"] == "ok"
     lone = rows[f"{folder} (series 1)"]
-    assert lone["status"] == "skipped" and "localizer" in lone["message"]
+    assert lone["status"] == "skipped" and "not a volume" in lone["message"]
+    # each mesh says which series it came from
+    header = (out / "scan_series7.ply").read_bytes().split(b"end_header")[0].decode()
+    assert f"comment source {folder} (series 1.2.3.2)\n" in header
 
 
 def test_repeated_series_numbers_name_the_meshes_by_uid(tmp_path):
@@ -59,4 +62,11 @@ def test_convert_still_asks_which_series(tmp_path, capsys):
     code = main(["convert", str(folder), "-l", str(LEVEL), "-o", str(tmp_path / "x.ply")])
     err = capsys.readouterr().err
     assert code != 0 and "--series UID" in err and len(err.strip().splitlines()) == 1
+    assert err.count(str(folder)) == 1 and "(synthetic, 1 slice)" in err
     assert not (tmp_path / "x.ply").exists()
+    # the localizer alone is refused in one line that says why
+    args = ["convert", str(folder), "--series", "1.2.3.9", "-l", str(LEVEL)]
+    assert main([*args, "-o", str(tmp_path / "x.ply")]) == 1
+    err = capsys.readouterr().err
+    assert "is one slice, an image rather than a volume" in err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "x.ply").exists()

@@ -91,7 +91,7 @@ def _count(items: list) -> str:
     """What a series holds, for the listing of several series."""
     frames = [int(ds.get("NumberOfFrames", 1) or 1) for _, ds in items if _is_multiframe(ds)]
     if not frames:
-        return f"{len(items)} slices"
+        return "1 slice" if len(items) == 1 else f"{len(items)} slices"
     if len(items) == 1:
         return f"one multi-frame file of {frames[0]} frames"
     return f"{len(items)} files, {len(frames)} of them multi-frame"
@@ -227,8 +227,8 @@ def read_dicom(path: Path, options: ReadOptions) -> Volume:
                 for uid, items in series.items()
             )
             raise FormatError(
-                f"{path}: {len(series)} DICOM series {where}: {listing}; choose one with "
-                "--series UID"
+                f"{path}: {len(series)} DICOM series{'' if path.is_dir() else ' ' + where}: "
+                f"{listing}; choose one with --series UID"
             )
         wanted = next(iter(series))
     elif wanted not in series:
@@ -241,7 +241,13 @@ def read_dicom(path: Path, options: ReadOptions) -> Volume:
         notes.append(f"series {wanted}, one of {len(series)} {where}")
     multi = [f.name for f, ds in items if _is_multiframe(ds)]
     if multi and len(items) == 1:
-        return _multiframe_volume(path, items[0][0], items[0][1], notes)
+        return _named(_multiframe_volume(path, items[0][0], items[0][1], notes), series, wanted)
+    if len(items) == 1:
+        raise FormatError(
+            f"{path}: series {wanted or '(no UID)'}{'' if path.is_dir() else ' ' + where} is "
+            "one slice, an image rather than a volume (a localizer?); a surface needs a "
+            "series of two or more slices"
+        )
     if multi:
         shown = ", ".join(multi[:3]) + (f" and {len(multi) - 3} more" if len(multi) > 3 else "")
         raise FormatError(
@@ -249,7 +255,15 @@ def read_dicom(path: Path, options: ReadOptions) -> Volume:
             f"multi-frame ({shown}); a multi-frame file is a volume by itself: give one file "
             "as the input"
         )
-    return _series_volume(path, items, notes)
+    return _named(_series_volume(path, items, notes), series, wanted)
+
+
+def _named(volume: Volume, series: dict, wanted: str) -> Volume:
+    """``volume``, its source naming the series when its folder holds several (the
+    mesh headers and messages then say which)."""
+    if len(series) > 1:
+        volume.source = f"{volume.source} (series {wanted})"
+    return volume
 
 
 def _series_volume(path: Path, items: list, notes: list[str]) -> Volume:
