@@ -64,13 +64,16 @@ def check_output(path: str | Path, force: bool = False, example: str = "mesh.ply
 
 
 @contextlib.contextmanager
-def atomic_output(path: str | Path, force: bool = False) -> Iterator[BinaryIO]:
+def atomic_output(
+    path: str | Path, force: bool = False, example: str = "mesh.ply"
+) -> Iterator[BinaryIO]:
     """Open a temporary file beside ``path``; rename it to ``path`` on success.
 
     On any exception (including KeyboardInterrupt) the temporary file is
-    removed, so a failed run leaves no partial output behind.
+    removed, so a failed run leaves no partial output behind. ``example`` is as
+    for :func:`check_output`.
     """
-    path = check_output(path, force)
+    path = check_output(path, force, example)
     try:
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
     except OSError as exc:

@@ -607,7 +607,7 @@ def convert(
     if report not in (None, "-") and not labels:
         reports = level_outputs(report, level)
         for path in reports:
-            check_output(path, force)  # before the work: a bad report name must not cost a mesh
+            check_output(path, force, "report.json")  # a bad report name must not cost a mesh
     if preview is not None:  # before the work: no renderer or a bad name must not cost a mesh
         from .preview import check_picture_output, require_renderer
 
@@ -909,7 +909,7 @@ def _emit_report(checked, target, required, *, as_json, force, quiet, changed=No
             text = format_report(checked)
             if changed is not None:
                 text += "\n\npost-processing changed:\n" + "\n".join(f"  {c}" for c in changed)
-        with atomic_output(target, force) as fh:
+        with atomic_output(target, force, "report.txt") as fh:
             fh.write((text + "\n").encode("utf-8"))
     elif target == "-" and not quiet:
         print(json.dumps(checked.to_dict(), indent=2) if as_json else format_report(checked))
@@ -1054,7 +1054,7 @@ def batch(
         if summary.resolve().parent.is_relative_to(out_dir.resolve()):
             early = batching.make_folders(summary.parent)  # inside -o, which batch makes
         try:
-            check_output(summary, force or skip_existing)
+            check_output(summary, force or skip_existing, "summary.json")
         except IsoconvertError:
             batching.remove_empty_folders(early)
             raise
@@ -1341,7 +1341,7 @@ def info(
 
         # before reading: a missing extra or an unwritable --plot fails at once
         require_matplotlib()
-        check_output(plot, force)
+        check_output(plot, force, "info.png")
     elif plot_level is not None:
         raise VolumeError("--level is for --plot (the contour drawn on the slices); add --plot")
     from .stats import histogram, suggested_levels

@@ -547,7 +547,7 @@ def write_info_plot(
     from PIL import Image
 
     require_matplotlib()
-    path = check_output(path, force)  # fail before reading anything
+    path = check_output(path, force, "info.png")  # fail before reading anything
     fig, result = info_figure(volume, level, hist=hist, levels=levels)
     pixels = render(fig, result)
     with atomic_output(path, force) as fh:

@@ -392,6 +392,10 @@ def test_report_to_a_text_file_is_the_printed_table(tmp_path, capsys):
     # check's --report always takes the next word, whatever its suffix
     assert main(["check", str(out), "--report", str(tmp_path / "c.md"), "-q"]) == 0
     assert (tmp_path / "c.md").read_text(encoding="utf-8") == table_of_check(out, capsys)
+    # a folder given as the report: one line suggesting a report's name, not a mesh's
+    assert main(["check", str(out), "--report", str(tmp_path), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"such as {tmp_path / 'report.txt'}" in err
     assert main(["check", str(out), "--report", str(js), "-q"]) == 0
     assert json.loads(js.read_text())["topology"]["per_component"][0]["genus"] == 1
 
