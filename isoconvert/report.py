@@ -406,6 +406,9 @@ def check_mesh(
     else:
         report = _check_segments(vertices, cells, frame, examples)
     report.source = source or str(mesh.info.get("source", ""))
+    unit = mesh.info.get("unit")
+    if isinstance(unit, str) and unit:
+        report.measures["unit"] = unit  # of lengths; areas and volumes in its square and cube
     if np.isfinite(vertices).all():  # a whole-array test first: per row costs 15 times more
         bad = np.zeros(0, np.int64)
     else:
@@ -795,9 +798,11 @@ def format_report(report: Report) -> str:
             + (f", genus {', '.join(genus[:8])}{' ...' if len(genus) > 8 else ''}" if genus else "")
         )
         m = report.measures
+        unit = m.get("unit")
+        squared, cubed = (f" {unit}²", f" {unit}³") if unit else ("", "")
         lines.append(
-            f"  area {m['area']:.6g}"
-            + (f", enclosed volume {m['volume']:.6g}" if "volume" in m else "")
+            f"  area {m['area']:.6g}{squared}"
+            + (f", enclosed volume {m['volume']:.6g}{cubed}" if "volume" in m else "")
         )
         descriptions = TRIANGLE_CHECKS
     else:
@@ -809,6 +814,7 @@ def format_report(report: Report) -> str:
         lines.append(
             f"  {t['closed_polylines']} closed and {t['open_polylines']} open polyline(s), "
             f"length {report.measures['length']:.6g}"
+            + (f" {report.measures['unit']}" if report.measures.get("unit") else "")
         )
         descriptions = SEGMENT_CHECKS
     lines.append("")

@@ -412,3 +412,28 @@ def test_check_prints_a_table_and_rejects_unknown_names(tmp_path, capsys):
     (tmp_path / "bad.ply").write_bytes(b"ply\nformat nonsense\n")
     assert main(["check", str(tmp_path / "bad.ply")]) == 1
     assert "not a readable PLY" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("name", "level", "unit"), [
+    ("ct_chest_LIDC-IDRI-0314_dicom", "1300.5", "mm"),
+    ("XYZ_organ-of-corti_confocal.tif", "2500.5", "µm"),
+])  # fmt: skip
+def test_reports_give_the_unit_the_file_records(tmp_path, capsys, name, level, unit):
+    """Every format that records the volume's unit gives it back to the report (PLY's
+    ASCII header escapes µm); STL records none. Areas agree across formats."""
+    from conftest import dataset
+
+    first = tmp_path / "m.ply"
+    assert main(["convert", str(dataset(name)), "-l", level, "-o", str(first), "-q"]) == 0
+    mesh = read_mesh(first)
+    mesh.info.update(unit=unit, source="")  # as convert gives it to the writers
+    areas = {}
+    for fmt in ("ply", "obj", "off", "vtp", "glb", "3mf", "stl"):
+        out = first if fmt == "ply" else write_mesh(mesh, tmp_path / f"m.{fmt}")
+        report = check_mesh(read_mesh(out))
+        areas[fmt] = report.measures["area"]
+        assert report.measures.get("unit") == (None if fmt == "stl" else unit)
+        capsys.readouterr()
+        assert main(["check", str(out)]) == 0
+        assert (f" {unit}²" in capsys.readouterr().out) == (fmt != "stl")
+    assert max(areas.values()) == pytest.approx(min(areas.values()), rel=1e-6)

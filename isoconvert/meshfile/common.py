@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FormatError
-from ..writers.header import parse_grid_comment
+from ..writers.header import parse_grid_comment, unescape_comment
 
 #: A PLY header longer than this is not one (a binary file without end_header).
 _MAX_HEADER_BYTES = 1 << 24
@@ -56,6 +56,19 @@ def _first_grid(comments: list[str]) -> dict | None:
         if grid is not None:
             return grid
     return None
+
+
+def _recorded(comments: list[str]) -> dict:
+    """What isoconvert's header comments record for the report: ``grid`` (the grid
+    record) and ``unit`` (the volume's length unit, from a ``unit U`` line)."""
+    out: dict = {}
+    grid = _first_grid(comments)
+    if grid is not None:
+        out["grid"] = grid
+    unit = next((t[5:].strip() for t in comments if t.startswith("unit ") and t[5:].strip()), None)
+    if unit is not None:
+        out["unit"] = unescape_comment(unit)  # PLY headers are ASCII: "\\xb5m" for µm
+    return out
 
 
 def _mapped(fh, start: int):

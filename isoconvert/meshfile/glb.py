@@ -107,6 +107,8 @@ def _read_glb(path: Path) -> Mesh:
         grid = normalized_grid(ours.get("grid"))
         if grid is not None:
             info["grid"] = grid
+        if _positive(ours.get("meters_per_unit")):
+            info["unit"] = str(ours.get("unit"))  # the unit the positions are back in
     return Mesh(np.concatenate(vertices_list), np.concatenate(cells_list), info=info)
 
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import FormatError, one_line
 from ..mesh import Mesh
-from .common import _first_grid, _numbers, _obj_fan, _Unreadable, _why
+from .common import _numbers, _obj_fan, _recorded, _Unreadable, _why
 
 _OBJ_LINES = {
     kind: re.compile(rb"^[ \t]*" + kind + rb"[ \t]+([^\r\n]*)", re.MULTILINE)
@@ -33,9 +33,7 @@ def _read_obj(path: Path) -> Mesh:
         polygons, sizes = _obj_indices(path, text, lines, b"l", n)
         cells, owner = _obj_fan(path, polygons, sizes, 2)
     info: dict = {"source": str(path), "stored_precision": "float64"}
-    grid = _first_grid(_obj_comments(text))
-    if grid is not None:
-        info["grid"] = grid
+    info.update(_recorded(_obj_comments(text)))
     return Mesh(vertices, cells, info=info)
 
 

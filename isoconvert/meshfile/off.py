@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import FormatError
 from ..mesh import Mesh
-from .common import _fans, _first_grid, _numbers, _Unreadable, _why
+from .common import _fans, _numbers, _recorded, _Unreadable, _why
 
 
 def _read_off(path: Path) -> Mesh:
@@ -68,7 +68,5 @@ def _read_off(path: Path) -> Mesh:
         cell = row if owner is None else int(owner[row])
         raise FormatError(f"{path}: face {cell} refers to vertex {index}, {_why(index, n)}")
     info: dict = {"source": str(path), "stored_precision": "float64"}
-    grid = _first_grid(comments)
-    if grid is not None:
-        info["grid"] = grid
+    info.update(_recorded(comments))
     return Mesh(vertices, cells, info=info)

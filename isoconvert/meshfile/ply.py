@@ -13,9 +13,9 @@ from .common import (
     _MAX_HEADER_BYTES,
     _as_stored,
     _fans,
-    _first_grid,
     _mapped,
     _numbers,
+    _recorded,
     _Unreadable,
     _why,
 )
@@ -153,9 +153,7 @@ def _read_ply(path: Path) -> Mesh:
         cell = row if owner is None else int(owner[row])
         raise FormatError(f"{path}: {kind} {cell} refers to vertex {index}, {_why(index, n)}")
     info: dict = {"source": str(path), "stored_precision": precision}
-    grid = _first_grid(header.comments)
-    if grid is not None:
-        info["grid"] = grid
+    info.update(_recorded(header.comments))
     return Mesh(vertices, cells, info=info)
 
 

@@ -82,12 +82,23 @@ def _read_3mf(path: Path) -> Mesh:
         vertices = _as_stored(vertices, "float32")
     else:
         info["stored_precision"] = "float64"
+    unit_known = True
     for meta in (e for e in root if _tag(e) == "metadata"):
-        grid = parse_grid_comment((meta.text or "").strip())
+        text = (meta.text or "").strip()
+        grid = parse_grid_comment(text)
         if meta.get("name", "").endswith("grid") and grid is not None:
             info["grid"] = grid
-            break
+        if meta.get("name", "") == "isoconvert:coordinates" and "not converted" in text:
+            unit_known = False  # isoconvert wrote "millimeter" for want of a unit
+    # 3MF's units (millimeter when the model names none) by their usual symbols
+    unit = _3MF_SYMBOLS.get(root.get("unit", "millimeter"))
+    if unit_known and unit is not None:
+        info["unit"] = unit
     return Mesh(vertices, np.concatenate(cells_list), info=info)
+
+
+_3MF_SYMBOLS = {"micron": "µm", "millimeter": "mm", "centimeter": "cm", "inch": "in",
+                "foot": "ft", "meter": "m"}  # fmt: skip
 
 
 def _float32_text(values: np.ndarray) -> bool:

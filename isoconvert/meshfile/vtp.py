@@ -13,10 +13,10 @@ from ..mesh import Mesh
 from .common import (
     _MAX_HEADER_BYTES,
     _check_indices,
-    _first_grid,
     _mapped,
     _numbers,
     _obj_fan,
+    _recorded,
     _tag,
     _Unreadable,
 )
@@ -141,9 +141,7 @@ def _read_vtp(path: Path) -> Mesh:
     cells = np.concatenate(cells_list)
     _check_indices(path, cells, len(vertices), "polygon" if 3 in kinds else "line")
     info: dict = {"source": str(path), "stored_precision": precision}
-    grid = _first_grid(comments)
-    if grid is not None:
-        info["grid"] = grid
+    info.update(_recorded(comments))
     return Mesh(vertices, cells, info=info)
 
 
