@@ -50,9 +50,10 @@ _LOCK_WHOLE_BELOW = 5000
 _WIDER_FROM = 3
 #: Where input vertices are left farther than ``max_error``, the ring around each is
 #: locked and the library's limit scaled by this; in the last ``_TIGHTEN_LAST``
-#: attempts the limit is scaled by how far the estimate undershot instead. Tightening
-#: the limit alone kept 9-56 % of what 90 % asks on real scans at 0.5-1 (frog, chest
-#: CT); locking where it undershoots keeps 52-92 % (bench/bench_post.py).
+#: attempts the limit is scaled by how far the estimate undershot instead. Lowering
+#: the limit alone removed 9-56 % where 90 % was asked on real scans at 0.5-1 mm
+#: (frog, chest CT); locking where it undershoots removes 52-85 % (the README's
+#: Decimation paragraph has the cases).
 _TIGHTEN_BY = 0.9
 _TIGHTEN_LAST = 6
 
