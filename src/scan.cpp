@@ -7,6 +7,14 @@
 #include <limits>
 #include <string>
 
+// An AVX2 first pass for float32, chosen at run time (float_row_avx2 below)
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define ISO_SCAN_AVX2 1
+#include <immintrin.h>
+#else
+#define ISO_SCAN_AVX2 0
+#endif
+
 namespace iso {
 
 namespace {
@@ -160,9 +168,7 @@ void pack_signs(const T *p, i64 nx, const Threshold<T> &pos, std::uint64_t *out)
   }
 }
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-#define ISO_SCAN_AVX2 1
-#include <immintrin.h>
+#if ISO_SCAN_AVX2
 
 // The whole first pass over a row of float32 samples (range, NaN/Inf count,
 // equal samples and signs) in one loop of 8-sample AVX2 vectors, for CPUs that
