@@ -296,3 +296,22 @@ def test_broken_structure_names_the_problem(tmp_path, torus):
     (tmp_path / "index.vtp").write_text(text[:start] + "\n99999 " + text[start:])
     with pytest.raises(FormatError, match="refers to vertex"):
         read_mesh(tmp_path / "index.vtp")
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".obj", ".stl", ".off", ".vtp", ".glb", ".3mf"])
+def test_an_empty_file_says_so(tmp_path, suffix):
+    (tmp_path / f"e{suffix}").write_bytes(b"")
+    with pytest.raises(FormatError, match=r"the file is empty \(0 bytes\)"):
+        read_mesh(tmp_path / f"e{suffix}")
+
+
+def test_a_misspelt_ply_header_line_is_named(tmp_path, torus):
+    """An unknown header keyword is an error, not an element silently lost."""
+    good = write_mesh(torus, tmp_path / "t.ply", ascii=True).read_bytes()
+    bad = tmp_path / "bad.ply"
+    bad.write_bytes(good.replace(b"\nelement face", b"\nelemnt face", 1))
+    with pytest.raises(FormatError, match="unknown PLY header line 'elemnt face"):
+        read_mesh(bad)
+    # obj_info lines (some exporters write them) are still read past
+    (tmp_path / "info.ply").write_bytes(good.replace(b"\nelement", b"\nobj_info made\nelement", 1))
+    assert read_mesh(tmp_path / "info.ply").n_cells == torus.n_cells

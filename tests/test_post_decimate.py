@@ -136,3 +136,25 @@ def test_error_bound_on_a_noisy_scan_still_decimates():
     before, after = check_mesh(mesh), check_mesh(out)
     assert [k for k, ok in after.checks.items() if before.checks[k] and not ok] == []
     assert after.topology["components"] == before.topology["components"]
+
+
+def test_an_enormous_bound_is_no_bound():
+    """1e308 overflowed the distance search's grid (an internal error); it now
+    decimates as a bound larger than the mesh does, keeping every check."""
+    fuel = extract(read_volume(dataset("fuel_64x64x64_uint8.raw")), 80.5)
+    out = decimate(fuel, max_error=1e308)
+    assert out.n_cells < 0.5 * fuel.n_cells
+    before, after = check_mesh(fuel), check_mesh(out)
+    assert [k for k, ok in after.checks.items() if before.checks[k] and not ok] == []
+
+
+def test_an_infinite_bound_is_refused_in_one_line(tmp_path, capsys):
+    from isoconvert.cli import main
+
+    src = dataset("fuel_64x64x64_uint8.raw")
+    code = main(
+        ["convert", str(src), "-l", "80.5", "-o", str(tmp_path / "f.ply")] + ["--max-error", "inf"]
+    )
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and len(err.splitlines()) == 1 and "finite distance" in err
+    assert not (tmp_path / "f.ply").exists()

@@ -84,6 +84,8 @@ def read_mesh(path: str | Path) -> Mesh:
             f"{path}: unknown mesh extension {suffix or '(none)'!r}; "
             f"check reads {', '.join(MESH_SUFFIXES)}"
         )
+    if path.stat().st_size == 0:
+        raise FormatError(f"{path}: the file is empty (0 bytes); nothing to check")
     if suffix == ".stl":
         return _read_stl(path)
     reader = _READERS[suffix]

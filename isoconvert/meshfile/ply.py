@@ -62,10 +62,15 @@ class _PlyHeader:
     size: int  # bytes up to and including the end_header line
 
 
+#: Header keywords other than format, element, property, comment and end_header that
+#: PLY files use (ignored).
+_PLY_OTHER_KEYWORDS = ("obj_info",)
+
+
 def _ply_header(path: Path, fh) -> _PlyHeader:
     first = fh.readline(64)
     if first.strip() != b"ply":
-        raise _Unreadable("not a PLY file (its first line is not 'ply')")
+        raise _Unreadable("not a PLY file: its first line is not 'ply'")
     size = len(first)
     fmt = None
     elements: list[_Element] = []
@@ -103,6 +108,9 @@ def _ply_header(path: Path, fh) -> _PlyHeader:
             else:
                 raise _Unreadable(f"cannot read PLY header line {line!r}")
             elements[-1].properties.append(prop)
+        elif keyword not in _PLY_OTHER_KEYWORDS:
+            # a misspelt "element" would otherwise lose its element silently
+            raise _Unreadable(f"unknown PLY header line {line!r}")
     if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
         raise _Unreadable(f"unknown PLY format {fmt!r}")
     return _PlyHeader(fmt, elements, comments, size)

@@ -138,7 +138,9 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
     if reduction is not None and not 0.0 <= float(reduction) < 1.0:
         raise IsoconvertError(f"decimate: reduction {reduction} must be in [0, 1), e.g. 0.9")
     if max_error is not None and not (np.isfinite(max_error) and max_error > 0):
-        raise IsoconvertError(f"decimate: max_error {max_error} must be a positive distance")
+        raise IsoconvertError(
+            f"decimate: max_error {max_error} must be a finite positive distance (None: no bound)"
+        )
     mo = _meshoptimizer()
     simplify = _simplify_with_lock(mo)
 
@@ -150,7 +152,12 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
     indices = np.ascontiguousarray(cells, dtype=np.uint32).reshape(-1)
     target = 0 if reduction is None else 3 * int(round((1.0 - float(reduction)) * n_cells))
     options = mo.SIMPLIFY_LOCK_BORDER | mo.SIMPLIFY_ERROR_ABSOLUTE
-    limit = float(max_error) if max_error is not None else float(np.finfo(np.float32).max)
+    # distances are measured up to the bound, and none exceeds the mesh's extent (a
+    # larger radius, say 1e308, would only overflow the search grid)
+    extent = float(np.ptp(vertices, axis=0).max()) if len(vertices) else 0.0
+    radius = min(float(max_error), 2.0 * extent + 1.0) if max_error is not None else 0.0
+    # the library's limit (float32; 1e308 would be inf there, which it takes badly)
+    limit = radius if max_error is not None else float(np.finfo(np.float32).max)
     guard = _TopologyGuard(vertices, cells)
     # what is wrong with the input stays as it is: collapses never touch it
     locked = guard.input_problems.copy()
@@ -174,7 +181,7 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
             continue
         if max_error is None:
             break
-        distance = _vertex_distances(vertices, out, float(max_error))
+        distance = _vertex_distances(vertices, out, radius)
         deviation = float(distance.max())
         if deviation <= max_error:
             break

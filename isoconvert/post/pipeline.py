@@ -7,6 +7,7 @@ then decimate (a smoothed surface decimates with a smaller error).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -78,9 +79,10 @@ class PostOptions:
                 f"--decimate takes the fraction of triangles to remove, 0 <= F < 1, got "
                 f"{self.decimate}; e.g. --decimate 0.9 keeps about 10%"
             )
-        if self.max_error is not None and not self.max_error > 0:
+        if self.max_error is not None and not 0 < self.max_error < math.inf:
             raise IsoconvertError(
-                f"--max-error takes a distance in world units > 0, got {self.max_error}"
+                f"--max-error takes a finite distance in world units > 0, got {self.max_error}; "
+                "leave it out for no bound"
             )
 
     @property

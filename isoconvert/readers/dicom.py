@@ -233,7 +233,8 @@ def read_dicom(path: Path, options: ReadOptions) -> Volume:
         wanted = next(iter(series))
     elif wanted not in series:
         raise FormatError(
-            f"{path}: no series {wanted} {where}; there are {', '.join(series)}; "
+            f"{path}: no series {wanted}{'' if path.is_dir() else ' ' + where}; there are "
+            f"{', '.join(series)}; "
             "give one of these to --series"
         )
     items = series[wanted]
