@@ -287,3 +287,13 @@ def test_batch_writes_one_mesh_per_level_like_convert(tmp_path, capsys):
     assert [r["level"] for r in rows] == [60.5, 100.5, 200.5]  # by level, not by text
     assert main(["batch", str(src), "-o", str(tmp_path / "o2"), "-l", "1", "-l", "1"]) == 1
     assert "given twice" in capsys.readouterr().err
+
+
+def test_changed_lines_give_the_unit():
+    from isoconvert.post.pipeline import changes
+
+    before = {"measures": {"area": 10.0, "volume": 4.0, "unit": "mm"}, "checks": {}}
+    after = {"measures": {"area": 9.0, "volume": 4.0, "unit": "mm"}, "checks": {}}
+    assert changes(before, after) == ["area: 10 -> 9 mm² (-10.00%)"]
+    del before["measures"]["unit"], after["measures"]["unit"]
+    assert changes(before, after) == ["area: 10 -> 9 (-10.00%)"]

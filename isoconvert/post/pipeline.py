@@ -224,6 +224,8 @@ def changes(before: dict, after: dict) -> list[str]:
             report = report[key]
         return report
 
+    unit = get(after, ("measures", "unit"))
+    powers = {"area": "²", "volume": "³"}
     lines = []
     for label, path in _COMPARED:
         a, b = get(before, path), get(after, path)
@@ -233,7 +235,8 @@ def changes(before: dict, after: dict) -> list[str]:
             if a == b:
                 continue
             relative = f" ({(b - a) / abs(a):+.2%})" if a else ""
-            lines.append(f"{label}: {a:.6g} -> {b:.6g}{relative}")
+            suffix = f" {unit}{powers[label]}" if unit and label in powers else ""
+            lines.append(f"{label}: {a:.6g} -> {b:.6g}{suffix}{relative}")
         elif a != b:
             lines.append(f"{label}: {a:,} -> {b:,}")
     for name, passed in (before.get("checks") or {}).items():
