@@ -167,6 +167,16 @@ BOUNDING_BOX_NOTE = (
     "boundaries judged against the bounding box: no grid is recorded with the mesh; "
     "pass --grid VOLUME to judge them against the volume's grid"
 )
+#: What the report says of a label mesh (``--labels --single-file``).
+LABEL_NOTE = (
+    "a label mesh: watertight, manifold, oriented and no-holes are judged on each "
+    "label's surface (its triangles, facing out of it; topology.per_label); edges where "
+    "three or more labels meet are counted as non-manifold edges of the whole mesh"
+)
+#: The checks a label mesh passes when every label's surface passes them.
+LABEL_CHECKS = ("watertight", "manifold", "oriented", "no-holes")
+#: Labels listed one per line in the printed report.
+_LABEL_LINES = 12
 
 
 def grid_from_volume(volume: Volume) -> dict:
@@ -406,6 +416,13 @@ def check_mesh(
     else:
         report = _check_segments(vertices, cells, frame, examples)
     report.source = source or str(mesh.info.get("source", ""))
+    labels = mesh.cell_labels
+    if report.kind == "triangles" and labels is not None and len(labels) == len(cells):
+        per_label = _label_surfaces(vertices, cells, np.asarray(labels), frame)
+        report.topology["per_label"] = per_label
+        for check in LABEL_CHECKS:
+            report.checks[check] = all(surface[check] for surface in per_label)
+        report.notes.append(LABEL_NOTE)
     unit = mesh.info.get("unit")
     if isinstance(unit, str) and unit:
         report.measures["unit"] = unit  # of lengths; areas and volumes in its square and cube
@@ -440,6 +457,41 @@ def _check_indices(cells: np.ndarray, n_vertices: int, name: str) -> None:
     else:
         why = f"but there are only {n_vertices} vertices"
     raise FormatError(f"{name}: {kind} {row} refers to vertex {index}, {why}")
+
+
+def _label_surfaces(vertices, cells, labels, frame) -> list[dict]:
+    """Per label of a label mesh, the checks of its own surface: the triangles with
+    that label on either side, turned to face out of it.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    cells : (C, 3) int
+    labels : (C, 2) int
+        The labels on the two sides of each triangle; normals point from column 0
+        to column 1.
+    frame : _Frame
+        The whole mesh's, so that boundaries are judged as for the whole mesh.
+
+    Returns
+    -------
+    list of dict
+        ``label``, ``triangles``, ``components``, the :data:`LABEL_CHECKS`, and
+        ``volume`` (enclosed, positive: the surface faces out of the label) where
+        the surface is closed.
+    """
+    out = []
+    for value in np.unique(labels):
+        tris = np.concatenate([cells[labels[:, 0] == value], cells[labels[:, 1] == value][:, ::-1]])
+        used, local = np.unique(tris, return_inverse=True)
+        sub = _check_triangles(vertices[used], local.reshape(-1, 3), frame, 0)
+        surface = {"label": int(value), "triangles": len(tris)}
+        surface["components"] = sub.topology["components"]
+        surface.update({check: sub.checks[check] for check in LABEL_CHECKS})
+        if "volume" in sub.measures:
+            surface["volume"] = sub.measures["volume"]
+        out.append(surface)
+    return out
 
 
 def _check_triangles(vertices, cells, frame, n_examples) -> Report:
@@ -804,6 +856,17 @@ def format_report(report: Report) -> str:
             f"  area {m['area']:.6g}{squared}"
             + (f", enclosed volume {m['volume']:.6g}{cubed}" if "volume" in m else "")
         )
+        surfaces = t.get("per_label", [])
+        for surface in surfaces[:_LABEL_LINES]:
+            failed = [check for check in LABEL_CHECKS if not surface[check]]
+            lines.append(
+                f"  label {surface['label']}: {surface['triangles']:,} triangles, "
+                f"{surface['components']} component(s)"
+                + (f", volume {surface['volume']:.6g}{cubed}" if "volume" in surface else "")
+                + (f", not {', '.join(failed)}" if failed else ", closed")
+            )
+        if len(surfaces) > _LABEL_LINES:
+            lines.append(f"  ... and {len(surfaces) - _LABEL_LINES} more labels (--json lists all)")
         descriptions = TRIANGLE_CHECKS
     else:
         lines.append(

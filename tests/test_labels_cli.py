@@ -152,3 +152,34 @@ def test_batch_extracts_the_labels_of_every_file(atlas, tmp_path, capsys):
     assert main([*args, "--summary", str(tmp_path / "s2.json")]) == 1
     rows = json.loads((tmp_path / "s2.json").read_text())["files"]
     assert "a_label*.ply: already exists" in rows[0]["message"]
+
+
+def test_a_single_file_is_judged_label_by_label(atlas, tmp_path, capsys):
+    """Where three labels meet, edges have four triangles: the single-file mesh is
+    judged on each label's surface, which is closed, and encloses that label's voxels
+    (the background's encloses the others, inside out). A missing face is named."""
+    path, labels = atlas
+    out = tmp_path / "s.ply"
+    args = ["convert", str(path), "--labels", "--single-file", "--smooth", "0", "-o", str(out)]
+    assert main([*args, "-q", "--require", "watertight,manifold,oriented,no-holes"]) == 0
+    mesh = read_mesh(out)
+    report = check_mesh(mesh)
+    assert report.problems["non_manifold_edges"]["count"] > 0  # the triple junctions
+    assert all(report.checks[c] for c in ("watertight", "manifold", "oriented", "no-holes"))
+    voxel = np.prod(SPACING)
+    volumes = {s["label"]: s["volume"] for s in report.topology["per_label"]}
+    for value in (3, 7, 9):
+        assert np.isclose(volumes[value], np.count_nonzero(labels == value) * voxel)
+    assert np.isclose(volumes[0], -np.count_nonzero(labels) * voxel)
+    # one face between 3 and 7 taken out: those two labels are open, and say so
+    shared = np.flatnonzero((mesh.cell_labels == (3, 7)).all(axis=1))[0]
+    keep = np.arange(mesh.n_cells) != shared
+    broken = type(mesh)(mesh.vertices, mesh.cells[keep], cell_labels=mesh.cell_labels[keep])
+    report = check_mesh(broken)
+    assert not report.checks["watertight"]
+    open_labels = {s["label"] for s in report.topology["per_label"] if not s["watertight"]}
+    assert open_labels == {3, 7}
+    from isoconvert.report import format_report
+
+    text = format_report(report)
+    assert "label 3: " in text and "not watertight" in text and "label 9: " in text

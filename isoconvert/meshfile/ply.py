@@ -162,7 +162,13 @@ def _read_ply(path: Path) -> Mesh:
         raise FormatError(f"{path}: {kind} {cell} refers to vertex {index}, {_why(index, n)}")
     info: dict = {"source": str(path), "stored_precision": precision}
     info.update(_recorded(header.comments))
-    return Mesh(vertices, cells, info=info)
+    labels = None
+    if kind == "face" and {"inside_label", "outside_label"} <= set(data["face"]):
+        # a label mesh (convert --labels --single-file): the labels on each side
+        faces = data["face"]
+        labels = np.column_stack([faces["inside_label"], faces["outside_label"]]).astype(np.int64)
+        labels = labels if owner is None else labels[owner]
+    return Mesh(vertices, cells, info=info, cell_labels=labels)
 
 
 def _face_list(element: _Element) -> str:
@@ -197,7 +203,7 @@ def _ply_binary(path: Path, header: _PlyHeader, body: bytes, wanted: set[str]) -
             continue
         records, offset = _binary_lists(path, element, body, offset, order)
         if element.name in wanted:
-            out[element.name] = {"__lists__": records[_face_list(element)]}
+            out[element.name] = {**records, "__lists__": records[_face_list(element)]}
     missing = wanted - set(out)
     if missing:
         raise _Unreadable(f"no {' or '.join(sorted(missing))} data in the file")
