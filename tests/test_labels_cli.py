@@ -171,6 +171,10 @@ def test_a_single_file_is_judged_label_by_label(atlas, tmp_path, capsys):
     for value in (3, 7, 9):
         assert np.isclose(volumes[value], np.count_nonzero(labels == value) * voxel)
     assert np.isclose(volumes[0], -np.count_nonzero(labels) * voxel)
+    # the VTP file carries the labels too (its 2-component cell array)
+    vtp = tmp_path / "s.vtp"
+    assert main([*args[:-1], str(vtp), "-q"]) == 0
+    assert check_mesh(read_mesh(vtp)).topology["per_label"] == report.topology["per_label"]
     # one face between 3 and 7 taken out: those two labels are open, and say so
     shared = np.flatnonzero((mesh.cell_labels == (3, 7)).all(axis=1))[0]
     keep = np.arange(mesh.n_cells) != shared

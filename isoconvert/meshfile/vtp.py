@@ -98,6 +98,7 @@ def _read_vtp(path: Path) -> Mesh:
     comments = [m.group(1).strip().decode("utf-8", "replace") for m in _XML_COMMENT.finditer(xml)]
     comments += _vtp_field_strings(polydata, vtk)
     points_list, cells_list, kinds = [], [], set()
+    labels_list: list[np.ndarray | None] = []
     n = 0
     precision = "float32"
     for piece in (e for e in polydata if _tag(e) == "Piece"):
@@ -129,9 +130,11 @@ def _read_vtp(path: Path) -> Mesh:
             sizes = np.diff(np.concatenate([[0], offsets]))
             if (sizes < 0).any():
                 raise _Unreadable(f"the offsets of its {section} decrease")
-            cells, _ = _obj_fan(path, indices, sizes, size)
+            cells, owner = _obj_fan(path, indices, sizes, size)
             cells_list.append(cells + n)
             kinds.add(size)
+            if section == "Polys":
+                labels_list.append(_cell_labels(piece, vtk, number, owner))
         n += count
     if not cells_list:
         raise FormatError(f"{path}: holds no triangles or segments")
@@ -142,7 +145,26 @@ def _read_vtp(path: Path) -> Mesh:
     _check_indices(path, cells, len(vertices), "polygon" if 3 in kinds else "line")
     info: dict = {"source": str(path), "stored_precision": precision}
     info.update(_recorded(comments))
-    return Mesh(vertices, cells, info=info)
+    labels = None
+    if labels_list and all(a is not None for a in labels_list):
+        labels = np.concatenate(labels_list)
+    return Mesh(vertices, cells, info=info, cell_labels=labels)
+
+
+def _cell_labels(piece, vtk: _VtkData, number: int, owner) -> np.ndarray | None:
+    """(T, 2) int64: a label mesh's two labels per triangle, from the 2-component
+    cell array ``labels`` our writer gives a Piece of polygons only (cell data runs
+    over verts, lines, polys: only then do its rows follow the polygons); else None."""
+    cell_data = _vtk_section(piece, "CellData")
+    if cell_data is None or any(
+        int(piece.get(f"NumberOf{kind}", "0")) for kind in ("Verts", "Lines", "Strips")
+    ):
+        return None
+    array = next((e for e in cell_data if e.get("Name") == "labels"), None)
+    if array is None or array.get("NumberOfComponents") != "2":
+        return None
+    labels = _vtk_array(array, vtk, 2 * number).astype(np.int64).reshape(number, 2)
+    return labels if owner is None else labels[owner]
 
 
 def _vtk_section(piece, name: str):
