@@ -3,7 +3,7 @@
 Readers keep a volume's unit as the file names it (``Volume.unit``: "mm" from
 DICOM and NIfTI, "µm" or "micron" from ImageJ TIFF, "micrometer" from OME-Zarr,
 NRRD's ``space units``); writers whose format fixes or states a unit (GLB in
-meters, 3MF's ``unit`` attribute) look it up here.
+meters, 3MF's ``unit`` attribute, SVG's sizes) look it up here.
 """
 
 from __future__ import annotations

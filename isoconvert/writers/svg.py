@@ -20,21 +20,14 @@ import numpy as np
 
 from ..errors import FormatError
 from ..mesh import Mesh, polylines
+from ..units import meters_per_unit
 from .header import escape_comment
 
-#: Units SVG can state a length in, by the names volumes use, and the factor
-#: from the volume's unit to the SVG unit.
-SVG_UNITS = {
-    "mm": ("mm", 1.0),
-    "millimeter": ("mm", 1.0),
-    "millimetre": ("mm", 1.0),
-    "cm": ("cm", 1.0),
-    "in": ("in", 1.0),
-    "inch": ("in", 1.0),
-    "m": ("mm", 1000.0),
-    "meter": ("mm", 1000.0),
-    "metre": ("mm", 1000.0),
-}
+#: The units SVG can state a length in, by meters per unit of the volume (see
+#: :mod:`isoconvert.units` for the names volumes use): the SVG unit and the
+#: factor from the volume's unit to it. Micrometres and smaller are left out: a
+#: picture a few hundredths of a millimetre wide is useless on screen.
+SVG_UNITS = {1e-3: ("mm", 1.0), 1e-2: ("cm", 1.0), 0.0254: ("in", 1.0), 1.0: ("mm", 1000.0)}
 #: Largest side of a picture without a stated unit, in user units (CSS pixels).
 _TARGET_PIXELS = 800.0
 
@@ -149,7 +142,7 @@ def svg_size(size: np.ndarray, unit: str | None) -> tuple[str, str]:
         E.g. ``("12.5mm", "8mm")`` for a unit SVG has (see :data:`SVG_UNITS`),
         else unitless user units at a round scale (see the module).
     """
-    known = SVG_UNITS.get((unit or "").strip().lower())
+    known = SVG_UNITS.get(meters_per_unit(unit))
     if known is not None:
         name, factor = known
         return f"{size[0] * factor:.9g}{name}", f"{size[1] * factor:.9g}{name}"
