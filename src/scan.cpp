@@ -120,6 +120,27 @@ i64 count_equal_in_row(const T *p, i64 nx, T value) {
   return n;
 }
 
+// Add a floating-point row's range and NaN/Inf count to `acc`. `lo` and `hi`
+// came from a pass that keeps NaN out but lets +-Inf in: where the row has
+// non-finite samples, the range is taken again from its finite ones.
+template <class T>
+void add_float_range(const T *p, i64 nx, T lo, T hi, i64 bad, Partial &acc) {
+  if (bad) {
+    lo = std::numeric_limits<T>::infinity();
+    hi = -lo;
+    for (i64 i = 0; i < nx; ++i) {
+      const T v = p[i];
+      if (std::isfinite(v)) {
+        lo = std::min(lo, v);
+        hi = std::max(hi, v);
+      }
+    }
+  }
+  acc.nonfinite += bad;
+  acc.min = std::min(acc.min, static_cast<double>(lo));
+  acc.max = std::max(acc.max, static_cast<double>(hi));
+}
+
 // Range, NaN/Inf and equal samples of one row; the loops are kept simple so
 // that the compiler vectorizes them.
 template <class T>
@@ -128,20 +149,7 @@ void row_values(const T *p, i64 nx, bool count_equal, T equal_to, Partial &acc) 
     i64 bad = 0;
     T lo = std::numeric_limits<T>::infinity(), hi = -lo;
     float_range(p, nx, lo, hi, bad);
-    if (bad) {  // Inf got into lo/hi: redo the row with finite samples only
-      lo = std::numeric_limits<T>::infinity();
-      hi = -lo;
-      for (i64 i = 0; i < nx; ++i) {
-        const T v = p[i];
-        if (std::isfinite(v)) {
-          lo = std::min(lo, v);
-          hi = std::max(hi, v);
-        }
-      }
-    }
-    acc.nonfinite += bad;
-    acc.min = std::min(acc.min, static_cast<double>(lo));
-    acc.max = std::max(acc.max, static_cast<double>(hi));
+    add_float_range(p, nx, lo, hi, bad, acc);
   } else {
     T lo = p[0], hi = p[0];
     for (i64 i = 1; i < nx; ++i) {
@@ -218,20 +226,8 @@ __attribute__((target("avx2,popcnt"))) void float_row_avx2(const float *p, i64 n
     tail |= std::uint64_t(v >= threshold) << (k - full * 64);
   }
   if (full * 64 < nx) out[full] = tail;
-  if (bad) {  // Inf got into lo/hi: redo the range with finite samples only
-    lo = std::numeric_limits<float>::infinity();
-    hi = -lo;
-    for (i64 i = 0; i < nx; ++i) {
-      if (std::isfinite(p[i])) {
-        lo = std::min(lo, p[i]);
-        hi = std::max(hi, p[i]);
-      }
-    }
-  }
-  acc.nonfinite += bad;
   acc.equal += equal;
-  acc.min = std::min(acc.min, static_cast<double>(lo));
-  acc.max = std::max(acc.max, static_cast<double>(hi));
+  add_float_range(p, nx, lo, hi, bad, acc);
 }
 
 // ISOCONVERT_SIMD=sse2 keeps to the baseline passes (the tests compare both).
