@@ -42,3 +42,12 @@ def meters_per_unit(unit: str | None) -> float | None:
     if not isinstance(unit, str):
         return None
     return METERS_PER_UNIT.get(unit.strip().lower())
+
+
+#: The usual symbol of each length, by meters per unit.
+SYMBOLS = {1e-9: "nm", 1e-6: "µm", 1e-3: "mm", 1e-2: "cm", 0.0254: "in", 0.3048: "ft", 1.0: "m"}
+
+
+def unit_symbol(unit: str | None) -> str | None:
+    """The usual symbol of a length unit ("micron" -> "µm"), or None when unknown."""
+    return SYMBOLS.get(meters_per_unit(unit))

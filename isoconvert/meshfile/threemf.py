@@ -8,6 +8,7 @@ import numpy as np
 
 from ..errors import FormatError
 from ..mesh import Mesh
+from ..units import unit_symbol
 from ..writers.header import parse_grid_comment
 from .common import _as_stored, _check_indices, _tag, _Unreadable
 
@@ -90,15 +91,11 @@ def _read_3mf(path: Path) -> Mesh:
             info["grid"] = grid
         if meta.get("name", "") == "isoconvert:coordinates" and "not converted" in text:
             unit_known = False  # isoconvert wrote "millimeter" for want of a unit
-    # 3MF's units (millimeter when the model names none) by their usual symbols
-    unit = _3MF_SYMBOLS.get(root.get("unit", "millimeter"))
+    # 3MF's unit (millimeter when the model names none), by its usual symbol
+    unit = unit_symbol(root.get("unit", "millimeter"))
     if unit_known and unit is not None:
         info["unit"] = unit
     return Mesh(vertices, np.concatenate(cells_list), info=info)
-
-
-_3MF_SYMBOLS = {"micron": "µm", "millimeter": "mm", "centimeter": "cm", "inch": "in",
-                "foot": "ft", "meter": "m"}  # fmt: skip
 
 
 def _float32_text(values: np.ndarray) -> bool:
