@@ -54,9 +54,8 @@ def _read_glb(path: Path) -> Mesh:
     # isoconvert's files scale the volume's units to meters in their node: back to
     # the volume's units, where the grid record and the other formats have the mesh
     # (divided, not multiplied by an inverse, so that their own scale gives 1 exactly)
-    per_unit = 1.0
-    if isinstance(ours, dict) and _positive(ours.get("meters_per_unit")):
-        per_unit = float(ours["meters_per_unit"])
+    scaled = isinstance(ours, dict) and _positive(ours.get("meters_per_unit"))
+    per_unit = float(ours["meters_per_unit"]) if scaled else 1.0
     vertices_list, cells_list, kinds = [], [], set()
     n = 0
     transformed = False
@@ -107,7 +106,7 @@ def _read_glb(path: Path) -> Mesh:
         grid = normalized_grid(ours.get("grid"))
         if grid is not None:
             info["grid"] = grid
-        if _positive(ours.get("meters_per_unit")):
+        if scaled:
             info["unit"] = str(ours.get("unit"))  # the unit the positions are back in
     return Mesh(np.concatenate(vertices_list), np.concatenate(cells_list), info=info)
 
