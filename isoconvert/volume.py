@@ -62,6 +62,14 @@ class Volume:
         The anatomical frame of world coordinates when the file states one:
         "LPS" (x to the patient's left, y posterior, z superior: NRRD, DICOM,
         ITK's MetaImage) or "RAS" (NIfTI). :meth:`in_frame` converts.
+    files : tuple of str
+        Every file the header and samples are read from (a detached NRRD
+        header and its data files, a MetaImage header and its
+        ElementDataFile(s), each slice of a TIFF folder/glob, each DICOM file
+        of the series, the .nii, .npy/.npz, raw file, Zarr store folder...),
+        as given (absolute, not resolved through symlinks: a consumer that
+        must tell whether an output is one of them compares device and
+        inode). Empty for a volume made in memory.
     """
 
     data: np.ndarray
@@ -72,6 +80,7 @@ class Volume:
     notes: list[str] = field(default_factory=list)
     unit: str | None = None
     frame: str | None = None
+    files: tuple[str, ...] = ()
 
     # where ``data`` lives (see the property at the end of this module)
     _grid = None
@@ -90,6 +99,7 @@ class Volume:
                 f"{self.source}: spacing {tuple(self.spacing.tolist())} must be positive; "
                 "set it with --spacing"
             )
+        self.files = tuple(str(f) for f in self.files)
         if self.direction is None:
             self.direction = np.eye(nd)
         self.direction = np.asarray(self.direction, dtype=np.float64)
@@ -174,6 +184,7 @@ class Volume:
             notes=list(self.notes),
             unit=self.unit,
             frame=self.frame,
+            files=self.files,
         )
 
     def in_frame(self, frame: str) -> Volume:
@@ -208,6 +219,7 @@ class Volume:
             notes=[*self.notes, f"coordinates converted from {self.frame} to {target}"],
             unit=self.unit,
             frame=target,
+            files=self.files,
         )
 
 

@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import FormatError, VolumeError, one_line
 from ..grid import LazyGrid
 from ..volume import Volume
-from .options import ReadOptions
+from .options import ReadOptions, absolute_files
 
 #: relative and absolute (mm) tolerance of a slice gap against the median gap
 _GAP_RTOL = 0.01
@@ -327,6 +327,7 @@ def _series_volume(path: Path, items: list, notes: list[str]) -> Volume:
         notes=notes,
         unit="mm",
         frame="LPS",
+        files=absolute_files(f for f, _ in items),
     )
 
 
@@ -471,6 +472,7 @@ def _multiframe_volume(path: Path, f: Path, ds, notes: list[str]) -> Volume:
         notes=notes,
         unit="mm",
         frame="LPS",
+        files=absolute_files([f]),
     )
 
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import FormatError, VolumeError, one_line
 from ..volume import Volume
-from .options import ReadOptions
+from .options import ReadOptions, absolute_files
 
 
 def read_image(path: Path, options: ReadOptions) -> Volume:
@@ -46,4 +46,6 @@ def read_image(path: Path, options: ReadOptions) -> Volume:
         raise FormatError(f"{path}: not a readable image ({one_line(exc)})") from None
     if array.ndim != 2:
         raise VolumeError(f"{path}: expected a 2D image, got shape {array.shape}")
-    return Volume.from_zyx(np.ascontiguousarray(array), source=str(path), notes=notes)
+    return Volume.from_zyx(
+        np.ascontiguousarray(array), source=str(path), notes=notes, files=absolute_files([path])
+    )

@@ -34,7 +34,7 @@ from ..grid import RawGrid, read_exactly
 from ..memory import check_fits
 from ..volume import Volume
 from .nrrd import _data_path, _Inflater, numbered_names
-from .options import ReadOptions, check_channel
+from .options import ReadOptions, absolute_files, check_channel
 
 _MAX_HEADER = 1 << 20  # bytes of header before ElementDataFile (a LIST's names excluded)
 _MAX_LIST = 64 << 20  # bytes of a LIST of file names
@@ -135,7 +135,13 @@ def read_metaimage(path: Path, options: ReadOptions) -> Volume:
     described = f"DimSize {' '.join(map(str, sizes))} of {name}" + (
         f" x {channels} channels" if channels > 1 else ""
     )
-    data = _read_samples(header, sizes, channels, dtype, described, options.allow_outside_data)
+    names, subdim = _data_names(header, ndims)
+    files = (
+        None
+        if names is None
+        else [_checked_path(header, n, options.allow_outside_data) for n in names]
+    )
+    data = _read_samples(header, files, subdim, sizes, channels, dtype, described)
     if channel is not None:
         data = np.ascontiguousarray(data[..., channel])
     notes = []
@@ -153,6 +159,7 @@ def read_metaimage(path: Path, options: ReadOptions) -> Volume:
         "source": str(path),
         "notes": notes,
         "frame": "LPS",
+        "files": absolute_files([path, *(files or [])]),
     }
     if isinstance(data, RawGrid):
         return Volume(data, **placement)
@@ -301,12 +308,13 @@ def _checked_path(header: _Header, name: str, allow_outside: bool) -> Path:
         raise FormatError(str(err).replace("'data file'", "ElementDataFile")) from None
 
 
-def _read_samples(header, sizes, channels, dtype, described, allow_outside):
-    """(Z, Y, X[, C]) / (Y, X[, C]) array, or a RawGrid for plain 3D samples in one file."""
+def _read_samples(header, files, subdim, sizes, channels, dtype, described):
+    """(Z, Y, X[, C]) / (Y, X[, C]) array, or a RawGrid for plain 3D samples in one file.
+
+    ``files`` are the checked data files (None: LOCAL), each holding ``subdim`` axes.
+    """
     path = header.path
     ndims = len(sizes)
-    names, subdim = _data_names(header, ndims)
-    files = None if names is None else [_checked_path(header, n, allow_outside) for n in names]
     total = int(np.prod(sizes, dtype=np.int64)) * channels
     nbytes = total * dtype.itemsize
     shape_zyx = tuple(sizes[::-1]) + ((channels,) if channels > 1 else ())

@@ -30,7 +30,7 @@ from ..errors import FormatError, VolumeError, one_line
 from ..grid import RawGrid
 from ..memory import check_fits
 from ..volume import Volume
-from .options import ReadOptions
+from .options import ReadOptions, absolute_files
 
 _NEEDS = "reading NIfTI needs nibabel: pip install 'isoconvert[nifti]'"
 _RAS_NOTE = "coordinates in RAS (NIfTI's frame)"
@@ -162,6 +162,7 @@ def read_nifti(path: Path, options: ReadOptions) -> Volume:
         notes=notes,
         unit=unit,
         frame="RAS",
+        files=absolute_files([path]),
     )
 
 

@@ -30,7 +30,7 @@ from ..errors import FormatError, VolumeError, one_line
 from ..grid import LazyGrid, RawGrid, read_exactly
 from ..memory import check_fits
 from ..volume import Volume
-from .options import ReadOptions, select_channel
+from .options import ReadOptions, absolute_files, select_channel
 
 # "data file: <format> <min> <max> <step> [<subdim>]" (NRRD spec, detached headers)
 _MULTI_FILE = re.compile(r"^(\S*%\S*)\s+(-?\d+)\s+(-?\d+)\s+(-?\d+)(?:\s+(\d+))?$")
@@ -116,6 +116,7 @@ def read_nrrd(path: Path, options: ReadOptions) -> Volume:
         notes=notes,
         unit=unit,
         frame=_FRAMES.get(str(header.get("space", "")).strip().lower()),
+        files=absolute_files([path, *(files or [])]),
     )
 
 

@@ -27,7 +27,7 @@ from ..errors import FormatError, VolumeError, one_line
 from ..grid import RawGrid
 from ..memory import check_fits
 from ..volume import Volume
-from .options import ReadOptions
+from .options import ReadOptions, absolute_files
 
 _SPACING_NOTE = "no spacing in a NumPy file; using 1 on every axis; set --spacing"
 _SAVE_HINT = "save a (z, y, x) volume or a (y, x) image with np.save"
@@ -114,16 +114,18 @@ def _read_npy(path: Path) -> Volume:
             f"shape {shape} of {dtype} ({nbytes} bytes); the file is truncated, save it again"
         )
     notes = [_SPACING_NOTE]
+    files = absolute_files([path])
     if fortran:
         notes.append("Fortran-ordered array read as (x, y[, z])")
     # the axis fastest in the file is x: reversed for C order, as is for Fortran order
     xyz = shape if fortran else shape[::-1]
     if len(shape) == 3:
-        return Volume(RawGrid(path, dtype, xyz, offset), source=str(path), notes=notes)
+        grid = RawGrid(path, dtype, xyz, offset)
+        return Volume(grid, source=str(path), notes=notes, files=files)
     if 0 in shape:
-        return Volume(np.zeros(xyz, dtype), source=str(path), notes=notes)
+        return Volume(np.zeros(xyz, dtype), source=str(path), notes=notes, files=files)
     mapped = np.memmap(path, dtype=dtype, mode="c", offset=offset, shape=xyz[::-1])
-    return Volume.from_zyx(np.asarray(mapped), source=str(path), notes=notes)
+    return Volume.from_zyx(np.asarray(mapped), source=str(path), notes=notes, files=files)
 
 
 def _members(archive: zipfile.ZipFile, path: Path) -> dict[str, tuple]:
@@ -196,4 +198,4 @@ def _read_npz(path: Path, key: str | None) -> Volume:
         notes.append("Fortran-ordered array read as (x, y[, z])")
     xyz = shape if fortran else shape[::-1]
     data = out.view(read_as).reshape(xyz[::-1])
-    return Volume.from_zyx(data, source=str(path), notes=notes)
+    return Volume.from_zyx(data, source=str(path), notes=notes, files=absolute_files([path]))

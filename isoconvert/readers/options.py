@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterable
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -68,6 +70,17 @@ class ReadOptions:
         """Names of the options that differ from their defaults."""
         default = ReadOptions()
         return {f.name for f in fields(self) if getattr(self, f.name) != getattr(default, f.name)}
+
+
+def absolute_files(paths: Iterable[str | Path]) -> tuple[str, ...]:
+    """The files a volume is read from, for :attr:`Volume.files`: absolute, in order,
+    each once.
+
+    Made absolute against the working folder but not resolved through symlinks
+    (``os.path.abspath``): the name a user gave stays recognisable, and whoever
+    compares files compares their device and inode.
+    """
+    return tuple(dict.fromkeys(os.path.abspath(os.fspath(p)) for p in paths))
 
 
 def check_channel(count: int | None, channel: int | None, path: Path, what: str) -> int | None:

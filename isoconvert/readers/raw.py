@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import VolumeError
 from ..grid import RawGrid
 from ..volume import SUPPORTED_DTYPES, Volume
-from .options import ReadOptions
+from .options import ReadOptions, absolute_files
 
 # Common spellings from other tools (NRRD, VTK, MetaImage) mapped to numpy names.
 _DTYPE_ALIASES = {
@@ -110,8 +110,8 @@ def read_raw(path: Path, options: ReadOptions) -> Volume:
     if len(shape) == 3:
         # read slab by slab when extracted block-wise; whole, it is the same map
         grid = RawGrid(path, dtype, tuple(shape), options.header_bytes)
-        return Volume(grid, source=str(path), notes=notes)
-    return Volume.from_zyx(data, source=str(path), notes=notes)
+        return Volume(grid, source=str(path), notes=notes, files=absolute_files([path]))
+    return Volume.from_zyx(data, source=str(path), notes=notes, files=absolute_files([path]))
 
 
 # Samples looked at to judge the byte order: a few slabs, never the whole file.

@@ -22,7 +22,7 @@ from ..errors import FormatError, InputNotFoundError, VolumeError, one_line
 from ..grid import LazyGrid
 from ..memory import check_fits
 from ..volume import Volume
-from .options import ReadOptions, check_channel
+from .options import ReadOptions, absolute_files, check_channel
 from .stacks import TIFF_SUFFIXES, natural_key
 
 _CHANNELS = "channels (RGB or multi-channel)"
@@ -76,11 +76,18 @@ def read_tiff(path: Path, options: ReadOptions) -> Volume:
             with tifffile.TiffFile(files[0]) as tif:
                 spacing, unit, notes = _spacing(tif, 3)
             notes.insert(0, f"{len(files)} slices, {files[0].name} .. {files[-1].name}")
+    placement = {
+        "spacing": spacing,
+        "source": spec,
+        "notes": notes,
+        "unit": unit,
+        "files": absolute_files(files),
+    }
     if isinstance(data, LazyGrid):
-        return Volume(data, spacing=spacing, source=spec, notes=notes, unit=unit)
+        return Volume(data, **placement)
     if data.dtype == np.bool_:
         data = data.view(np.uint8)
-    return Volume.from_zyx(data, spacing=spacing, source=spec, notes=notes, unit=unit)
+    return Volume.from_zyx(data, **placement)
 
 
 def _read_file(path: Path, channel: int | None, spec: str):

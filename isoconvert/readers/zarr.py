@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import FormatError, VolumeError, one_line
 from ..grid import LazyGrid
 from ..volume import Volume
-from .options import ReadOptions, check_channel
+from .options import ReadOptions, absolute_files, check_channel
 from .stacks import is_zarr_store
 
 # Arrays of at most this many stored chunks (or shards) are checked for missing ones when
@@ -292,14 +292,20 @@ def _volume(path, array_path, array, axes, scale, shift, notes, options) -> Volu
     if len(set(units)) > 1:
         listed = ", ".join(f"{axes[i][0]} {u or '(none)'}" for i, u in zip(xyz, units, strict=True))
         notes.append(f"the spatial axes have different units ({listed}); no unit is given")
+    # the store's folder stands for all its files (metadata and chunks)
+    placement = {
+        "spacing": spacing,
+        "origin": origin,
+        "source": str(path),
+        "notes": notes,
+        "unit": unit,
+        "files": absolute_files([path]),
+    }
     if len(spatial) == 2:
-        data = grid.read_all()
-        return Volume.from_zyx(
-            data, spacing=spacing, origin=origin, source=str(path), notes=notes, unit=unit
-        )
+        return Volume.from_zyx(grid.read_all(), **placement)
     if grid.stored_chunks() <= _CHECK_AT_OPEN:
         grid.check_chunks(0, grid.shape[2])
-    return Volume(grid, spacing=spacing, origin=origin, source=str(path), notes=notes, unit=unit)
+    return Volume(grid, **placement)
 
 
 def _roles(where: Path, axes, shape, spatial: list[int], channel: int | None) -> tuple:
