@@ -389,9 +389,10 @@ def _is_2d_image(path: Path, reader: str) -> bool:
         if reader == "tiff":
             import tifffile
 
-            from .readers.tiff import kept_axes
+            from .readers.tiff import check_complete, kept_axes
 
             with tifffile.TiffFile(path) as tif:
+                check_complete(tif, path)  # a truncated stack is not "a 2D image"
                 series = tif.series[0]
                 axes = kept_axes(series.axes, series.shape)
             return len(axes) - any(a in "CS" for a in axes) == 2  # less a channel axis

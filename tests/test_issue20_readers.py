@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from isoconvert import read_volume
+from isoconvert.errors import FormatError
 
 
 def _abs(*paths) -> set[str]:
@@ -195,3 +196,110 @@ def test_files_survive_copies(tmp_path):
     assert set(vol.in_frame("ras").files) == expected
     assert set(vol.with_placement(spacing=(2, 2, 2)).files) == expected
     assert set(dataclasses.replace(vol, data=vol.data).files) == expected
+
+
+# --- 2. truncated TIFFs ---------------------------------------------------------------------
+
+
+def _stack(nz=27, ny=20, nx=30) -> np.ndarray:
+    return (np.arange(nz * ny * nx) % 251).astype(np.uint8).reshape(nz, ny, nx)
+
+
+def _cut(path: Path, size: int) -> Path:
+    data = path.read_bytes()
+    assert size < len(data)
+    path.write_bytes(data[:size])
+    return path
+
+
+def test_truncated_imagej_stack_is_corrupt_not_a_2d_image(tmp_path):
+    tifffile = pytest.importorskip("tifffile")
+    path = tmp_path / "X.tif"
+    tifffile.imwrite(path, _stack(), imagej=True, metadata={"axes": "ZYX"})
+    with tifffile.TiffFile(path) as tif:
+        assert tif.imagej_metadata["images"] == 27 and len(tif.pages) == 27
+        first = tif.pages[0]
+        start, per_page = first.dataoffsets[0], first.databytecounts[0]
+    _cut(path, start + per_page * 3 // 2)  # about 1.5 pages of samples
+    with tifffile.TiffFile(path) as tif:  # what tifffile makes of it: one 2D page
+        assert tif.series[0].shape == (20, 30)
+    with pytest.raises(FormatError) as err:
+        read_volume(path)
+    assert str(err.value) == (
+        f"{path}: corrupt TIFF: its ImageJ metadata declares 27 images but the file holds 1 "
+        "(truncated?); copy or save the file again"
+    )
+    from isoconvert.batch import _is_2d_image
+
+    assert not _is_2d_image(path, "tiff")
+
+
+def test_tiff_whose_ome_metadata_declares_more_planes_is_corrupt(tmp_path):
+    tifffile = pytest.importorskip("tifffile")
+    full = tmp_path / "full.ome.tif"
+    tifffile.imwrite(full, _stack(), ome=True, metadata={"axes": "ZYX"})
+    with tifffile.TiffFile(full) as tif:
+        xml = tif.ome_metadata
+    assert 'SizeZ="27"' in xml
+    assert read_volume(full).shape == (30, 20, 27)
+    path = tmp_path / "three.ome.tif"  # three pages under metadata declaring 27
+    tifffile.imwrite(path, _stack()[:3], photometric="minisblack", description=xml, metadata=None)
+    with pytest.raises(
+        FormatError,
+        match=r"three\.ome\.tif: corrupt TIFF: its OME metadata "
+        r"declares 27 planes but the file holds 3 \(truncated\?\)",
+    ):
+        read_volume(path)
+
+
+def test_tiff_page_data_past_the_end_is_corrupt(tmp_path):
+    tifffile = pytest.importorskip("tifffile")
+    one = tmp_path / "one.tif"
+    tifffile.imwrite(one, _stack()[0], photometric="minisblack")
+    with tifffile.TiffFile(one) as tif:
+        end = tif.pages[0].dataoffsets[0] + tif.pages[0].databytecounts[0]
+    assert end == one.stat().st_size  # tifffile writes the samples last
+    _cut(one, end - 100)
+    with pytest.raises(FormatError) as err:
+        read_volume(one)
+    assert str(err.value) == (
+        f"{one}: corrupt TIFF: the image data of page 1 of 1 runs to byte {end}, past the end "
+        f"of the file ({end - 100} bytes) (truncated?); copy or save the file again"
+    )
+    # one cut slice of a folder is found when the folder is opened, before any work
+    folder = tmp_path / "slices"
+    folder.mkdir()
+    for k in range(4):
+        tifffile.imwrite(folder / f"s{k}.tif", _stack()[k], photometric="minisblack")
+    _cut(folder / "s2.tif", end - 1)
+    with pytest.raises(FormatError, match=r"s2\.tif: corrupt TIFF: the image data of page 1"):
+        read_volume(folder)
+
+
+def test_tiff_pointing_to_a_page_past_the_end_is_corrupt(tmp_path):
+    """A multi-page file cut after its first page header: the header's pointer to the
+    next page leads past the end."""
+    tifffile = pytest.importorskip("tifffile")
+    path = tmp_path / "cut.tif"
+    tifffile.imwrite(path, _stack()[:5], photometric="minisblack", metadata=None)
+    with tifffile.TiffFile(path) as tif:
+        second = tif.pages[1].offset
+        first_end = tif.pages[0].dataoffsets[0] + tif.pages[0].databytecounts[0]
+    assert first_end <= second
+    _cut(path, first_end)
+    with pytest.raises(
+        FormatError,
+        match=r"cut\.tif: corrupt TIFF: page 1 points to a next "
+        rf"page at byte {second}, past the end of the file",
+    ):
+        read_volume(path)
+
+
+def test_whole_tiffs_still_read(tmp_path):
+    tifffile = pytest.importorskip("tifffile")
+    path = tmp_path / "ij.tif"
+    tifffile.imwrite(path, _stack(), imagej=True, metadata={"axes": "ZYX"})
+    assert np.array_equal(read_volume(path).data, _stack().T)
+    compressed = tmp_path / "z.tif"
+    tifffile.imwrite(compressed, _stack()[:4], photometric="minisblack", compression="zlib")
+    assert np.array_equal(read_volume(compressed).data, _stack()[:4].T)

@@ -95,6 +95,7 @@ def _read_file(path: Path, channel: int | None, spec: str):
     import tifffile
 
     with tifffile.TiffFile(path) as tif:
+        check_complete(tif, path)
         series = tif.series[0]
         series_notes = _check_series(tif, path)
         index, axes = _selection(series.axes, series.shape, channel, path)
@@ -105,6 +106,116 @@ def _read_file(path: Path, channel: int | None, spec: str):
             data = _pick_channel(series.asarray(), series.axes, channel, path)
         spacing, unit, notes = _spacing(tif, data.ndim)
     return data, spacing, unit, series_notes + notes
+
+
+_TRUNCATED = "(truncated?); copy or save the file again"
+
+
+def check_complete(tif, path: Path) -> None:
+    """Refuse a TIFF that holds less than its own structure and metadata declare.
+
+    A copy cut short keeps its first pages, and often its metadata: tifffile
+    then reads the pages that are left (an ImageJ stack of 27 images becomes one
+    2D image) or invents the rest. From the headers alone, without reading a
+    pixel, a file is corrupt when
+
+    * a page's strips or tiles run past the end of the file;
+    * its last page points to a next page past the end of the file;
+    * its ImageJ metadata declares more images than the file holds (ImageJ
+      may store the images of a large stack after one page header: those count);
+    * its OME metadata declares more planes than the file has pages (unless
+      the OME metadata spreads the image over several files).
+
+    Raises
+    ------
+    FormatError
+        ``"PATH: corrupt TIFF: ... (truncated?)"``.
+    """
+    size = tif.filehandle.size
+    pages = tif.pages
+    count = len(pages)  # indexes the whole chain of page headers
+    if count == 0:
+        return  # not a TIFF at all: tifffile says so when the series is read
+    ij = tif.imagej_metadata if tif.is_imagej else None
+    declared = ij.get("images") if isinstance(ij, dict) else None
+    if isinstance(declared, int) and declared > count:
+        held = count
+        if len(tif.series):
+            series = tif.series[0]
+            per_page = math.prod(series.keyframe.shape) or 1
+            held = max(count, math.prod(series.shape) // per_page)
+        if declared > held:
+            raise FormatError(
+                f"{path}: corrupt TIFF: its ImageJ metadata declares {declared} images but the "
+                f"file holds {held} {_TRUNCATED}"
+            )
+    planes = _ome_planes(tif)
+    if planes is not None and planes > count:
+        raise FormatError(
+            f"{path}: corrupt TIFF: its OME metadata declares {planes} planes but the file "
+            f"holds {count} {_TRUNCATED}"
+        )
+
+    for n in range(count):
+        page = pages[n]
+        ends = [
+            int(o) + int(c)
+            for o, c in zip(page.dataoffsets, page.databytecounts, strict=False)
+            if c
+        ]
+        if ends and max(ends) > size:
+            raise FormatError(
+                f"{path}: corrupt TIFF: the image data of page {n + 1} of {count} runs to byte "
+                f"{max(ends)}, past the end of the file ({size} bytes) {_TRUNCATED}"
+            )
+    _check_next_page(tif, path, size, count)
+
+
+def _check_next_page(tif, path: Path, size: int, count: int) -> None:
+    """The last page's pointer to a next page must be 0 (none) or inside the file."""
+    import struct
+
+    where = getattr(tif.pages, "next_page_offset", None)
+    if where is None or tif.tiff.is_ndpi:
+        return
+    fmt = tif.tiff.offsetformat
+    fh = tif.filehandle
+    fh.seek(where)
+    raw = fh.read(struct.calcsize(fmt))
+    following = struct.unpack(fmt, raw)[0] if len(raw) == struct.calcsize(fmt) else size
+    if following >= size:
+        raise FormatError(
+            f"{path}: corrupt TIFF: page {count} points to a next page at byte {following}, "
+            f"past the end of the file ({size} bytes) {_TRUNCATED}"
+        )
+
+
+def _ome_planes(tif) -> int | None:
+    """The planes (pages) the OME metadata of ``tif`` declares, or None when it has none
+    or spreads its images over several files (TiffData naming a file)."""
+    if not tif.is_ome or not tif.ome_metadata:
+        return None
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(tif.ome_metadata)
+    except ET.ParseError:
+        return None
+    if any(el.tag.endswith("UUID") and el.get("FileName") for el in root.iter()):
+        return None
+    planes = 0
+    for pixels in (el for el in root.iter() if el.tag.endswith("Pixels")):
+        try:
+            z, c, t = (int(pixels.get(f"Size{a}", 1)) for a in "ZCT")
+            samples = max(
+                [int(ch.get("SamplesPerPixel", 1)) for ch in pixels if ch.tag.endswith("Channel")]
+                or [1]
+            )
+        except ValueError:
+            return None
+        # an RGB channel of 3 samples is one plane of 3 samples per pixel
+        planes += z * t * max(1, c // max(samples, 1))
+    return planes or None
 
 
 def _check_series(tif, path: Path) -> list[str]:
@@ -244,6 +355,7 @@ def _slice_stack(files: list[Path], channel: int | None, spec: str) -> TiffStack
     first = None
     for f in files:
         with tifffile.TiffFile(f) as tif:
+            check_complete(tif, f)
             series = tif.series[0]
             index, _ = _selection(series.axes, series.shape, channel, f)
             shape = _sliced(series.shape, index)
