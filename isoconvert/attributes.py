@@ -26,6 +26,10 @@ from .writers.chunks import row_chunks
 #: Grid layers read at a time when the volume is read from its file.
 SLAB_LAYERS = 64
 
+#: Layers read below and above each slab: one for a central difference, one
+#: for a point the kernel places in the neighbouring cell by rounding.
+HALO = 2
+
 #: How far outside a grid (in samples) a point may be and still be sampled on
 #: its face (rounding of world coordinates); beyond it, the value is NaN.
 SLACK = 1e-6
@@ -106,8 +110,15 @@ def _sample(
         these = slice(a, b) if in_order else order[a:b]
         if a == b:
             continue
-        # a cell's corners reach one layer up; a gradient one more each way
-        lo, hi = max(0, k - 1), min(depth, k + SLAB_LAYERS + 2)
+        # a cell's corners reach one layer up; a gradient one more each way.
+        # And one more layer each way again: the kernel finds each point's cell
+        # from its world position with its own arithmetic, which may round a
+        # point on a layer (index z = 64 exactly) to the other side of it
+        # (63.99999999999999) than `layer` above did, when a direction matrix
+        # mixes z with x and y. Without that layer the stencil of the cell
+        # below reached past the slab: NaN, replaced by the triangles' normal
+        # (issue 20); the kernel now raises instead.
+        lo, hi = max(0, k - HALO), min(depth, k + SLAB_LAYERS + 1 + HALO)
         zyx = kernel_type(grid_slab_zyx(volume.samples, lo, hi), volume.source)
         if in_order:
             run(zyx, lo, vertices[these], out[these])

@@ -11,6 +11,7 @@
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -34,12 +35,19 @@ struct Slab {
   i64 nx, ny, nz, k0, depth;
   bool fill_nonfinite;
   double fill;
+  // Set when a point needed a layer the slab does not hold: the caller's slab
+  // was too thin, a bug to report, not a NaN to pass on (a NaN gradient would
+  // silently become the triangles' normal, issue 20).
+  std::atomic<bool> *missing;
 
-  // The sample at (i, j) of global layer k; NaN when the layer is not in the
-  // slab (the caller passes slabs that cover every layer its points need).
+  // The sample at (i, j) of global layer k; NaN (and `missing` set) when the
+  // layer is not in the slab.
   double at(i64 i, i64 j, i64 k) const {
     const i64 local = k - k0;
-    if (local < 0 || local >= nz) return std::numeric_limits<double>::quiet_NaN();
+    if (local < 0 || local >= nz) {
+      missing->store(true, std::memory_order_relaxed);
+      return std::numeric_limits<double>::quiet_NaN();
+    }
     const double v = static_cast<double>(f[(local * ny + j) * nx + i]);
     return (fill_nonfinite && !std::isfinite(v)) ? fill : v;
   }
@@ -183,17 +191,25 @@ void bind_sample_type(nb::module_ &m) {
           throw std::invalid_argument("the slab's layers are not inside the grid");
         }
         const PointMap map = point_map(origin, to_index, to_world, sign, normalize);
-        const Slab<T> s{f.data(), i64(f.shape(2)), i64(f.shape(1)), i64(f.shape(0)),
-                        k0,       depth,           fill_nonfinite,  fill};
-        nb::gil_scoped_release unlocked;
-        sample_points<T>(s, map, points.data(), n, gradient, slack, threads, out.data());
+        std::atomic<bool> missing{false};
+        const Slab<T> s{f.data(), i64(f.shape(2)), i64(f.shape(1)), i64(f.shape(0)), k0,
+                        depth,    fill_nonfinite,  fill,            &missing};
+        {
+          nb::gil_scoped_release unlocked;
+          sample_points<T>(s, map, points.data(), n, gradient, slack, threads, out.data());
+        }
+        if (missing.load()) {
+          throw std::logic_error(
+              "sample_points: a point needs a grid layer outside the slab it was given");
+        }
       },
       "f"_a.noconvert(), "k0"_a, "depth"_a, "points"_a.noconvert(), "origin"_a, "to_index"_a,
       "to_world"_a, "sign"_a, "normalize"_a, "gradient"_a, "fill_nonfinite"_a, "fill"_a,
       "slack"_a, "threads"_a, "out"_a.noconvert(),
       "Trilinear values (out (N,) float32) or world gradients (out (N, 3) float32) at\n"
       "world points (N, 3), from layers k0 .. k0 + nz - 1 of a grid of `depth` layers;\n"
-      "NaN for points outside the grid by more than `slack` samples.");
+      "NaN for points outside the grid by more than `slack` samples. Raises when a\n"
+      "point needs a layer the slab does not hold (the caller's slab is too thin).");
 }
 
 }  // namespace
