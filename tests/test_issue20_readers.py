@@ -303,3 +303,99 @@ def test_whole_tiffs_still_read(tmp_path):
     compressed = tmp_path / "z.tif"
     tifffile.imwrite(compressed, _stack()[:4], photometric="minisblack", compression="zlib")
     assert np.array_equal(read_volume(compressed).data, _stack()[:4].T)
+
+
+# --- 3. NIfTI: an unusable sform falls back to the qform ------------------------------------
+
+
+def _rotation_z(degrees: float) -> np.ndarray:
+    t = np.radians(degrees)
+    return np.array([[np.cos(t), -np.sin(t), 0], [np.sin(t), np.cos(t), 0], [0, 0, 1]])
+
+
+def _corners(shape) -> np.ndarray:
+    """(8, 3) grid corners (i, j, k) of a grid of ``shape`` (x, y, z)."""
+    return np.array(
+        [
+            [i, j, k]
+            for i in (0, shape[0] - 1)
+            for j in (0, shape[1] - 1)
+            for k in (0, shape[2] - 1)
+        ],
+        dtype=np.float64,
+    )
+
+
+@pytest.mark.parametrize(
+    "sform, why",
+    [
+        (np.zeros((4, 4)), "zero"),
+        (np.diag([2.0, 0.0, 1.0, 1.0]), "singular"),  # an axis of zero length
+        (np.array([[1, 1, 0, 0], [1, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], float), "singular"),
+        (np.diag([np.nan, 1.0, 1.0, 1.0]), "not finite"),
+    ],
+)
+def test_nifti_unusable_sform_is_placed_by_the_qform(tmp_path, sform, why):
+    nib = pytest.importorskip("nibabel")
+    data = zyx_field(nz=4, ny=5, nx=6).T.copy()  # (x, y, z) = (6, 5, 4)
+    qform = np.eye(4)
+    qform[:3, :3] = _rotation_z(30) @ np.diag([3.0, 2.5, 1.5])
+    qform[:3, 3] = (5.0, 7.0, 9.0)
+    img = nib.Nifti1Image(data, qform)
+    img.set_qform(qform, code=1)
+    img.set_sform(qform, code=2)
+    path = tmp_path / "v.nii"
+    nib.save(img, path)
+    # then the sform written over (nibabel refuses to set a NaN one): NIfTI-1 keeps
+    # sform_code at byte 254 and srow_x, srow_y, srow_z (4 float32 each) from byte 280
+    with open(path, "r+b") as fh:
+        fh.seek(280)
+        fh.write(np.asarray(sform[:3], dtype="<f4").tobytes())
+    header = nib.load(path).header
+    assert int(header["sform_code"]) == 2 and int(header["qform_code"]) == 1
+    assert np.array_equal(header.get_sform()[:3], sform[:3], equal_nan=True)
+    expected = nib.affines.apply_affine(header.get_qform(), _corners(data.shape))
+    assert np.allclose(header.get_qform(), qform, atol=1e-5)  # nibabel keeps our qform
+
+    vol = read_volume(path)
+    assert np.allclose(vol.index_to_world(_corners(vol.shape)), expected, atol=1e-9)
+    assert np.allclose(vol.spacing, [3.0, 2.5, 1.5], atol=1e-5)
+    assert f"sform unusable ({why}); placed by the qform (qform_code 1)" in vol.notes
+    assert not any("degenerate" in n for n in vol.notes)
+
+
+def test_nifti_unusable_sform_and_no_qform_is_placed_by_the_voxel_sizes(tmp_path):
+    nib = pytest.importorskip("nibabel")
+    data = zyx_field(nz=4, ny=5, nx=6).T.copy()
+    img = nib.Nifti1Image(data, np.diag([3.0, 2.5, 1.5, 1.0]))
+    img.set_qform(None, code=0)
+    img.set_sform(np.diag([3.0, 2.5, 1.5, 1.0]), code=1)
+    path = tmp_path / "v.nii"
+    nib.save(img, path)
+    with open(path, "r+b") as fh:  # the sform zeroed (srow_x, srow_y, srow_z from byte 280)
+        fh.seek(280)
+        fh.write(bytes(48))
+    header = nib.load(path).header
+    vol = read_volume(path)
+    expected = nib.affines.apply_affine(header.get_base_affine(), _corners(data.shape))
+    assert np.allclose(vol.index_to_world(_corners(vol.shape)), expected)
+    assert any(
+        n.startswith("placement from the voxel sizes only (sform unusable (zero)")
+        for n in vol.notes
+    )
+
+
+def test_nifti_usable_sform_still_wins(tmp_path):
+    nib = pytest.importorskip("nibabel")
+    data = zyx_field(nz=4, ny=5, nx=6).T.copy()
+    sform = np.diag([2.0, 3.0, 4.0, 1.0])
+    sform[:3, 3] = (-1, -2, -3)
+    img = nib.Nifti1Image(data, None)
+    img.set_qform(np.eye(4), code=1)
+    img.set_sform(sform, code=2)
+    path = tmp_path / "v.nii"
+    nib.save(img, path)
+    vol = read_volume(path)
+    expected = nib.affines.apply_affine(sform, _corners(data.shape))
+    assert np.allclose(vol.index_to_world(_corners(vol.shape)), expected)
+    assert "placement from the sform (sform_code 2)" in vol.notes

@@ -114,7 +114,7 @@ def read_nifti(path: Path, options: ReadOptions) -> Volume:
     if scaled:
         notes.append(f"samples scaled by scl_slope {slope:g}, scl_inter {inter:g}")
     affine, which = _affine(header)
-    notes.append(f"placement from the {which}")
+    notes.append(which)
     notes.append(_RAS_NOTE)
     unit = _UNITS.get(header.get_xyzt_units()[0])
     flat = len(xyz) == 2 or xyz[2] == 1
@@ -192,16 +192,45 @@ def _volume_index(shape: tuple[int, ...], index: int | None, path: Path) -> int 
 
 
 def _affine(header) -> tuple[np.ndarray, str]:
+    """The voxel-to-world affine and the note saying which it is: the sform when its code
+    is set and it is usable, else the qform when its code is set and it is usable, else
+    nibabel's fallback from the voxel sizes."""
     sform_code = int(header["sform_code"])
     qform_code = int(header["qform_code"])
+    passed = []  # why a form whose code is set was not used
     if sform_code > 0:
-        return header.get_sform(), f"sform (sform_code {sform_code})"
+        sform = header.get_sform()
+        why = _unusable(sform)
+        if why is None:
+            return sform, f"placement from the sform (sform_code {sform_code})"
+        passed.append(f"sform unusable ({why})")
     if qform_code > 0:
-        return header.get_qform(), f"qform (qform_code {qform_code}; no sform)"
-    return (
-        header.get_base_affine(),
-        "voxel sizes only (no sform or qform; nibabel's fallback, centred, x flipped)",
+        qform = header.get_qform()
+        why = _unusable(qform)
+        if why is None:
+            if passed:
+                return qform, f"{passed[0]}; placed by the qform (qform_code {qform_code})"
+            return qform, f"placement from the qform (qform_code {qform_code}; no sform)"
+        passed.append(f"qform unusable ({why})")
+    why = "; ".join(passed) if passed else "no sform or qform"
+    return header.get_base_affine(), (
+        f"placement from the voxel sizes only ({why}; nibabel's fallback, centred, x flipped)"
     )
+
+
+def _unusable(affine: np.ndarray) -> str | None:
+    """Why a 4x4 affine cannot place a grid (None when it can): not finite, zero, or singular
+    (an axis of zero length, or axes in one plane)."""
+    affine = np.asarray(affine, dtype=np.float64)
+    if not np.all(np.isfinite(affine)):
+        return "not finite"
+    linear = affine[:3, :3]
+    if not np.any(linear):
+        return "zero"
+    lengths = np.linalg.norm(linear, axis=0)
+    if not np.all(lengths > 0) or abs(np.linalg.det(linear / lengths)) <= 1e-6:
+        return "singular"
+    return None
 
 
 def _placement(affine: np.ndarray, notes: list[str]):
