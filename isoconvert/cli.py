@@ -1303,8 +1303,9 @@ def info(
         Path | None,
         typer.Option(
             "--plot",
-            help="Also write a PNG: the histogram with the suggested levels, and the middle "
-            "slices with the contour at --level (needs isoconvert\\[plot]).",
+            help="Also write a picture (.png, .svg or .pdf, as the name ends): the histogram "
+            "with the suggested levels, and the middle slices with the contour at --level "
+            "(needs isoconvert\\[plot]).",
         ),
     ] = None,
     plot_level: Annotated[
@@ -1337,14 +1338,16 @@ def info(
     from .readers import read_volume
 
     if plot is not None:
-        from .infoplot import require_matplotlib
+        from .infoplot import plot_format, require_matplotlib
 
-        # before reading: a missing extra or an unwritable --plot fails at once
+        # before reading: a missing extra, a format not written or an unwritable
+        # --plot fails at once
         require_matplotlib()
+        plot_format(plot)
         check_output(plot, force, "info.png")
     elif plot_level is not None:
         raise VolumeError("--level is for --plot (the contour drawn on the slices); add --plot")
-    from .stats import histogram, suggested_levels
+    from .stats import histogram, no_levels_reason, suggested_levels, text_histogram
 
     kwargs = _read_kwargs(
         input_format,
@@ -1364,7 +1367,7 @@ def info(
     )
     volume = read_volume(input, format=kwargs.pop("input_format"), **kwargs)
     hist = histogram(volume.samples)
-    levels = suggested_levels(hist) if hist.counts.sum() else {}
+    levels = suggested_levels(hist)  # empty when no level gives a surface
     if plot is not None:
         from .infoplot import write_info_plot
 
@@ -1379,10 +1382,12 @@ def info(
         "origin": volume.origin.tolist(),
         "direction": volume.direction.tolist(),
         "unit": volume.unit,
-        "min": float(hist.edges[0]),
-        "max": float(hist.edges[-2] if hist.integer else hist.edges[-1]),
+        # null without finite samples: no range is made up
+        "min": hist.low if hist.finite else None,
+        "max": hist.high if hist.finite else None,
         "nonfinite": hist.nonfinite,
         "suggested_levels": levels,
+        "no_levels_reason": no_levels_reason(hist),
         "notes": volume.notes,
     }
     if as_json:
@@ -1397,14 +1402,21 @@ def info(
         for r, row in enumerate(volume.direction):
             label = "direction" if r == 0 else ""
             print(f"  {label:<9} {' '.join(f'{v: .4f}' for v in row)}")
-    print(f"  range     {summary['min']:g} .. {summary['max']:g}")
-    if hist.nonfinite:
+    if hist.finite:
+        print(f"  range     {summary['min']:g} .. {summary['max']:g}")
+    else:
+        print("  range     none (no finite samples)")
+    if hist.nonfinite and hist.finite:
         print(f"  NaN/Inf   {hist.nonfinite:,} samples (use --nan-as VALUE to contour)")
     for note in volume.notes:
         print(f"  note      {note}")
-    print("  histogram")
-    for line in _text_histogram(hist):
+    rows = text_histogram(hist)
+    if rows:
+        print("  histogram")
+    for line in rows:
         print("    " + line)
+    if summary["no_levels_reason"]:
+        print(f"  levels    none: {summary['no_levels_reason']}")
     if levels:
         suggestions = ", ".join(f"{k} {v:g}" for k, v in levels.items())
         print(f"  suggested levels: {suggestions}")
@@ -1414,24 +1426,6 @@ def _identity(n: int):
     import numpy as np
 
     return np.eye(n)
-
-
-def _text_histogram(hist, rows: int = 12, width: int = 40) -> list[str]:
-    """Bars of sample counts in ``rows`` equal value ranges (log scale, as CT is skewed)."""
-    import numpy as np
-
-    from .stats import equal_bins
-
-    lo, hi = float(hist.edges[0]), float(hist.edges[-1])
-    bounds = equal_bins(lo, hi, rows)
-    which = np.clip(np.searchsorted(bounds, hist.centers, side="right") - 1, 0, rows - 1)
-    counts = np.bincount(which, weights=hist.counts, minlength=rows)
-    scale = np.log1p(counts) / max(np.log1p(counts).max(), 1e-12)
-    bars = ["#" * int(round(s * width)) for s in scale]
-    return [
-        f"{bounds[r]:>10.4g} .. {bounds[r + 1]:<10.4g} {bars[r]:<{width}} {int(counts[r]):,}"
-        for r in range(rows)
-    ]
 
 
 @app.command(cls=_Command, hidden=True)

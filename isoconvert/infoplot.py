@@ -1,6 +1,7 @@
 """A picture of a volume for choosing a level: the histogram and the middle slices.
 
-``isoconvert info VOLUME --plot info.png`` draws, in one PNG:
+``isoconvert info VOLUME --plot info.png`` draws, in one picture (PNG, SVG or
+PDF, as the file's suffix says: :data:`PLOT_FORMATS`):
 
 - the histogram of the finite samples (log counts), with the suggested levels
   (:func:`~isoconvert.stats.suggested_levels`, the very values ``info --json``
@@ -30,8 +31,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .atomic import atomic_output, check_output
-from .errors import IsoconvertError, LevelError
-from .stats import Histogram, histogram, suggested_levels
+from .errors import IsoconvertError, LevelError, OutputError
+from .stats import Histogram, histogram, no_levels_reason, suggested_levels
 from .volume import Volume, slabs
 
 if TYPE_CHECKING:
@@ -56,6 +57,8 @@ FIGSIZE = (10.0, 6.8)
 DPI = 100
 #: Height of the histogram row, inches.
 HIST_HEIGHT = 2.4
+#: What ``--plot`` writes, by the file's suffix: matplotlib's format names.
+PLOT_FORMATS = {".png": "png", ".svg": "svg", ".pdf": "pdf"}
 
 
 @dataclass(frozen=True)
@@ -133,11 +136,13 @@ class InfoPlot:
     Attributes
     ----------
     path : Path or None
-        The PNG written.
+        The picture written.
     size : (int, int)
-        Width and height in pixels.
-    level : float
-        The level contoured on the slices.
+        Width and height in pixels (of the PNG; an SVG or PDF has the same
+        layout, in points at 72 per inch instead of pixels at :data:`DPI`).
+    level : float or None
+        The level contoured on the slices; None when no level gives a surface
+        (a constant volume: the slices are drawn without contour).
     marked : dict of str to float
         The suggested levels marked on the histogram (equal to ``levels``).
     colors : dict of str to str
@@ -150,7 +155,7 @@ class InfoPlot:
 
     path: Path | None
     size: tuple[int, int]
-    level: float
+    level: float | None
     marked: dict[str, float]
     colors: dict[str, str]
     panels: dict[str, Panel] = field(default_factory=dict)
@@ -165,7 +170,26 @@ def require_matplotlib() -> None:
         raise IsoconvertError("pictures need matplotlib: pip install 'isoconvert[plot]'") from None
 
 
-def resolve_level(spec: str | float | None, levels: dict[str, float], hist: Histogram) -> float:
+def plot_format(path: str | Path) -> str:
+    """matplotlib's name of the format ``path``'s suffix asks for.
+
+    Raises
+    ------
+    OutputError
+        A suffix that is none of :data:`PLOT_FORMATS` (one line listing them).
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix not in PLOT_FORMATS:
+        raise OutputError(
+            f"{path}: --plot writes {', '.join(PLOT_FORMATS)} pictures, as the name ends; "
+            f"not {suffix or 'a name without suffix'}"
+        )
+    return PLOT_FORMATS[suffix]
+
+
+def resolve_level(
+    spec: str | float | None, levels: dict[str, float], hist: Histogram
+) -> float | None:
     """The level to contour: a number, a suggested level's name, or the first suggestion.
 
     Parameters
@@ -181,16 +205,24 @@ def resolve_level(spec: str | float | None, levels: dict[str, float], hist: Hist
 
     Returns
     -------
-    float
+    float or None
+        None for no contour: ``spec`` is None and no level gives a surface
+        (every finite sample has one value).
 
     Raises
     ------
     LevelError
-        Not a number or a name, not finite, or where no contour can be (not
-        above the smallest sample, or above the largest).
+        No finite sample (nothing to draw), a level asked for where no level
+        gives a surface, not a number or a name, not finite, or where no
+        contour can be (not above the smallest sample, or above the largest).
     """
-    if not levels:
-        raise LevelError("the volume has no finite samples, so there is no level to contour")
+    reason = no_levels_reason(hist)
+    if not hist.finite:
+        raise LevelError(f"--plot: nothing to draw: {reason}")
+    if reason is not None:
+        if spec is None:
+            return None
+        raise LevelError(f"--level {spec}: {reason}")
     if spec is None:
         return float(next(iter(levels.values())))
     text = str(spec).strip().lower()
@@ -204,8 +236,7 @@ def resolve_level(spec: str | float | None, levels: dict[str, float], hist: Hist
         raise LevelError(
             f"--level must be a number or one of {', '.join(['auto', *levels])}, got {spec!r}"
         ) from None
-    lo = float(hist.edges[0])
-    hi = float(hist.edges[-2] if hist.integer else hist.edges[-1])
+    lo, hi = hist.low, hist.high
     # positive samples are those >= level: at or below the minimum all are
     # positive, above the maximum none are; either way nothing to contour
     if not math.isfinite(value) or not lo < value <= hi:
@@ -354,7 +385,7 @@ def info_figure(
     if hist is None:
         hist = histogram(volume.samples)
     if levels is None:
-        levels = suggested_levels(hist) if hist.counts.sum() else {}
+        levels = suggested_levels(hist)
     value = resolve_level(level, levels, hist)
     views = middle_slices(volume)
     colors = {name: _level_color(name, n) for n, name in enumerate(levels)}
@@ -378,8 +409,7 @@ def info_figure(
     unit = f" ({volume.unit})" if volume.unit else ""
     _, _, world = _display_axes(volume)
     names = "xyz"
-    lo = float(hist.edges[0])
-    hi = float(hist.edges[-2] if hist.integer else hist.edges[-1])
+    lo, hi = hist.low, hist.high
     for col, view in enumerate(views):
         ax = fig.add_subplot(grid[1, col], label=view.name)
         left, right, bottom, top = view.extent()
@@ -398,7 +428,7 @@ def info_figure(
         ax.set_ylim((top, bottom) if view.y_down else (bottom, top))
         # equal scales: one world unit is as long across as up (anisotropic spacing shows)
         ax.set_aspect("equal", adjustable="box")
-        segs = slice_contour(view, value, nan_as=lo)
+        segs = np.zeros((0, 2, 2)) if value is None else slice_contour(view, value, nan_as=lo)
         result.segments[view.name] = len(segs)
         if len(segs):
             ax.add_collection(LineCollection(segs, colors=CONTOUR_COLOR, linewidths=1.4))
@@ -410,9 +440,10 @@ def info_figure(
         ax.tick_params(labelsize=8)
     shape = " x ".join(map(str, volume.shape))
     spacing = " x ".join(f"{s:g}" for s in volume.spacing)
+    contour = f"contour at {value:g}" if value is not None else no_levels_reason(hist)
     fig.suptitle(
         f"{Path(volume.source).name}: {shape} {volume.dtype.name}, spacing {spacing}"
-        f"{' ' + volume.unit if volume.unit else ''}; contour at {value:g}",
+        f"{' ' + volume.unit if volume.unit else ''}; {contour}",
         fontsize=10,
     )
     return fig, result
@@ -449,28 +480,37 @@ def _level_color(name: str, n: int) -> str:
 
 
 def _draw_histogram(
-    ax: Axes, hist: Histogram, levels: dict[str, float], level: float, colors: dict[str, str]
+    ax: Axes,
+    hist: Histogram,
+    levels: dict[str, float],
+    level: float | None,
+    colors: dict[str, str],
 ) -> None:
     """Log counts per bin, the chosen level dashed, the suggested levels as lines."""
     edges = hist.edges
-    if hist.integer:
+    counts = hist.counts.astype(np.float64)
+    if not hist.low < hist.high:
+        # one value: one bar centred on it (the bins' made-up width would show a range)
+        half = max(0.5, abs(hist.low) * 1e-6)
+        edges, counts = np.array([hist.low - half, hist.low + half]), counts[counts > 0]
+    elif hist.integer:
         # bin b holds exactly the value edges[b]: centre its bar on that value,
         # so half-integer suggested levels fall between bars
         edges = edges - 0.5
-    counts = hist.counts.astype(np.float64)
     # log scale: empty bins drawn just under 1 (a count of 1 still shows)
     ax.stairs(np.maximum(counts, 0.5), edges, baseline=0.5, fill=True, color=_HIST_COLOR)
     ax.set_yscale("log")
     ax.set_ylim(0.5, max(float(counts.max()), 1.0) * 2.0)
     ax.set_xlim(float(edges[0]), float(edges[-1]))
-    ax.axvline(
-        level,
-        color=CONTOUR_COLOR,
-        linestyle=(0, (4, 2)),
-        linewidth=1.5,
-        zorder=2,
-        label=f"contour {level:.6g}",
-    )
+    if level is not None:
+        ax.axvline(
+            level,
+            color=CONTOUR_COLOR,
+            linestyle=(0, (4, 2)),
+            linewidth=1.5,
+            zorder=2,
+            label=f"contour {level:.6g}",
+        )
     for name, value in levels.items():
         # not antialiased: the marker's pixels keep its exact colour
         ax.axvline(
@@ -488,7 +528,8 @@ def _draw_histogram(
     ax.set_ylabel("samples")
     ax.tick_params(labelsize=8)
     # outside the plot, so the only marker-coloured pixels inside are the markers
-    ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=8, frameon=False)
+    if levels or level is not None:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=8, frameon=False)
 
 
 def render(fig: Figure, result: InfoPlot) -> np.ndarray:
@@ -522,13 +563,14 @@ def write_info_plot(
     levels: dict[str, float] | None = None,
     force: bool = False,
 ) -> InfoPlot:
-    """Write the info picture of ``volume`` as a PNG (see the module).
+    """Write the info picture of ``volume`` (see the module).
 
     Parameters
     ----------
     volume : Volume
     path : str or Path
-        The PNG to write; it appears whole or not at all.
+        The picture to write, in the format its suffix names (``.png``, ``.svg``
+        or ``.pdf``); it appears whole or not at all.
     level, hist, levels
         See :func:`info_figure`.
     force : bool
@@ -542,16 +584,23 @@ def write_info_plot(
     Raises
     ------
     IsoconvertError
-        matplotlib missing, a bad level, or an output that cannot be written.
+        matplotlib missing, a bad level, a suffix naming no format it writes,
+        or an output that cannot be written.
     """
     from PIL import Image
 
     require_matplotlib()
+    kind = plot_format(path)
     path = check_output(path, force, "info.png")  # fail before reading anything
     fig, result = info_figure(volume, level, hist=hist, levels=levels)
     pixels = render(fig, result)
-    with atomic_output(path, force) as fh:
-        Image.fromarray(pixels).save(fh, format="PNG", optimize=True)
+    with atomic_output(path, force, "info.png") as fh:
+        if kind == "png":
+            Image.fromarray(pixels).save(fh, format="PNG", optimize=True)
+        else:
+            # vector formats from the same figure; no date, so a run is repeatable
+            stamp = {"svg": {"Date": None}, "pdf": {"CreationDate": None}}[kind]
+            fig.savefig(fh, format=kind, dpi=DPI, metadata=stamp)
     result.path = Path(path)
     return result
 
@@ -559,11 +608,13 @@ def write_info_plot(
 __all__ = [
     "CONTOUR_COLOR",
     "LEVEL_COLORS",
+    "PLOT_FORMATS",
     "InfoPlot",
     "Panel",
     "SliceView",
     "info_figure",
     "middle_slices",
+    "plot_format",
     "render",
     "resolve_level",
     "slice_contour",

@@ -7,10 +7,12 @@ samples where that could overflow.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import LevelError
 from .volume import slabs, value_range
 
 _FLOAT_BINS = 1024
@@ -92,12 +94,26 @@ class Histogram:
         Whether the samples are integers (one bin per value).
     nonfinite : int
         NaN/Inf samples, left out of the counts.
+    low, high : float
+        The smallest and largest finite sample; NaN when there is none. (The
+        bins of a constant volume span a made-up width beyond ``high``, so
+        the range is this, not the edges.)
+
+    A volume without finite samples has no bins: ``edges (1,)`` holding NaN,
+    ``counts (0,)``.
     """
 
     edges: np.ndarray
     counts: np.ndarray
     integer: bool
     nonfinite: int
+    low: float = math.nan
+    high: float = math.nan
+
+    @property
+    def finite(self) -> int:
+        """How many samples are counted (the finite ones)."""
+        return int(self.counts.sum())
 
     @property
     def centers(self) -> np.ndarray:
@@ -107,7 +123,15 @@ class Histogram:
         return midpoint(self.edges[:-1], self.edges[1:])
 
     def percentile(self, q: float) -> float:
-        """The value below which ``q`` percent of the samples lie (bin accuracy)."""
+        """The value below which ``q`` percent of the samples lie (bin accuracy).
+
+        Raises
+        ------
+        LevelError
+            There is no finite sample.
+        """
+        if not self.finite:
+            raise LevelError(no_levels_reason(self))
         cum = np.cumsum(self.counts)
         b = int(np.searchsorted(cum, q / 100.0 * cum[-1]))
         return float(self.centers[min(b, len(self.counts) - 1)])
@@ -130,7 +154,8 @@ def histogram(data: np.ndarray) -> Histogram:
     """
     rng = value_range(data)
     if not np.isfinite(rng.min):
-        return Histogram(np.array([0.0, 1.0]), np.zeros(1, np.int64), False, rng.nonfinite)
+        # no finite sample: no bins (a range such as 0 .. 1 would be made up)
+        return Histogram(np.array([math.nan]), np.zeros(0, np.int64), False, rng.nonfinite)
     lo, hi = rng.min, rng.max
     integer = (
         np.issubdtype(data.dtype, np.integer)
@@ -144,14 +169,63 @@ def histogram(data: np.ndarray) -> Histogram:
                 (slab.ravel() - np.int64(lo)).astype(np.intp), minlength=len(counts)
             )
         edges = np.arange(lo, hi + 2, dtype=np.float64)
-        return Histogram(edges, counts, True, 0)
+        return Histogram(edges, counts, True, 0, float(lo), float(hi))
     edges = equal_bins(lo, hi, _FLOAT_BINS)
     counts = np.zeros(_FLOAT_BINS, dtype=np.int64)
     for slab in slabs(data):
         values = slab[np.isfinite(slab)] if rng.nonfinite else slab
         # explicit edges: numpy searches them (no (hi - lo) scaling that could overflow)
         counts += np.histogram(values, bins=edges)[0]
-    return Histogram(edges, counts, False, rng.nonfinite)
+    return Histogram(edges, counts, False, rng.nonfinite, float(lo), float(hi))
+
+
+def _value(v: float) -> str:
+    """A sample value for a message: as short as ``:g``, exact to 10 digits."""
+    return f"{v:.10g}"
+
+
+def no_levels_reason(hist: Histogram) -> str | None:
+    """Why no level gives a surface, or None when some level does.
+
+    A level gives a surface when some samples are >= it and some are below
+    (the sign rule), i.e. for ``low < level <= high``: none exists when there
+    is no finite sample, or when every finite sample has one value.
+
+    Parameters
+    ----------
+    hist : Histogram
+
+    Returns
+    -------
+    str or None
+        One sentence, without the file name (the caller has it).
+    """
+    if not hist.finite:
+        return (
+            f"no finite samples (all {hist.nonfinite:,} are NaN or infinite), so no value "
+            "range and no level; --nan-as VALUE would make every sample that one value "
+            "(is --dtype or --endian wrong?)"
+        )
+    if hist.low < hist.high:
+        return None
+    if not hist.nonfinite:
+        return f"all samples are {_value(hist.low)}: no isosurface at any level"
+    return (
+        f"all {hist.finite:,} finite samples are {_value(hist.low)} (the other "
+        f"{hist.nonfinite:,} are NaN or infinite): no isosurface at any level, unless "
+        "--nan-as gives those another value"
+    )
+
+
+def _within(value: float, hist: Histogram) -> float:
+    """``value`` moved into ``(low, high]``, where every level gives a surface.
+
+    Bins a few ulps wide (a range of a few representable values) can put a
+    bin centre on ``low``; the nearest level above it then still splits.
+    """
+    if not value > hist.low:
+        value = min(float(np.nextafter(hist.low, math.inf)), hist.high)
+    return min(value, hist.high)
 
 
 def otsu_level(hist: Histogram) -> float:
@@ -173,8 +247,16 @@ def otsu_level(hist: Histogram) -> float:
     Returns
     -------
     float
-        The level; finite for any finite histogram.
+        The level, with ``hist.low < level <= hist.high``.
+
+    Raises
+    ------
+    LevelError
+        No level gives a surface (:func:`no_levels_reason` says why).
     """
+    reason = no_levels_reason(hist)
+    if reason is not None:
+        raise LevelError(reason)
     counts = hist.counts.astype(np.float64)
     centers = hist.centers
     if len(counts) < 2:
@@ -189,7 +271,7 @@ def otsu_level(hist: Histogram) -> float:
     # between[b]: lower class = bins 0..b. Ties (flat plateaus) take the middle.
     best = np.flatnonzero(between == between.max())
     b = int(best[len(best) // 2])
-    return float(midpoint(centers[b], centers[b + 1]))
+    return _within(float(midpoint(centers[b], centers[b + 1])), hist)
 
 
 def _positions(centers: np.ndarray) -> np.ndarray:
@@ -215,13 +297,49 @@ def suggested_levels(hist: Histogram) -> dict[str, float]:
     Returns
     -------
     dict of str to float
-        ``otsu``, ``p50``, ``p90``, ``p99``.
+        ``otsu``, ``p50``, ``p90``, ``p99``, each with ``hist.low < level <=
+        hist.high`` (so ``convert`` makes a surface at it); empty when no level
+        gives a surface (:func:`no_levels_reason`).
     """
+    if no_levels_reason(hist) is not None:
+        return {}
     levels = {"otsu": otsu_level(hist)}
     for q in (50, 90, 99):
         value = hist.percentile(q)
         if hist.integer:
             # halfway to a neighbour, inside the range
             value += 0.5 if value + 1 <= hist.edges[-2] else -0.5
-        levels[f"p{q}"] = value
+        levels[f"p{q}"] = _within(value, hist)
     return levels
+
+
+def text_histogram(hist: Histogram, rows: int = 12, width: int = 40) -> list[str]:
+    """Bars of sample counts in ``rows`` equal value ranges from ``low`` to ``high``
+    (log scale, as CT is skewed), as ``info`` prints them.
+
+    A constant volume gets one row (its value), a volume without finite samples none:
+    no row shows a value the volume does not hold.
+
+    Parameters
+    ----------
+    hist : Histogram
+    rows, width : int
+        Rows, and characters of the longest bar.
+
+    Returns
+    -------
+    list of str
+    """
+    if not hist.finite:
+        return []
+    if not hist.low < hist.high:
+        return [f"{_value(hist.low):>10} {'#' * width} {hist.finite:,}"]
+    bounds = equal_bins(hist.low, hist.high, rows)
+    which = np.clip(np.searchsorted(bounds, hist.centers, side="right") - 1, 0, rows - 1)
+    counts = np.bincount(which, weights=hist.counts, minlength=rows)
+    scale = np.log1p(counts) / max(np.log1p(counts).max(), 1e-12)
+    bars = ["#" * int(round(s * width)) for s in scale]
+    return [
+        f"{bounds[r]:>10.4g} .. {bounds[r + 1]:<10.4g} {bars[r]:<{width}} {int(counts[r]):,}"
+        for r in range(rows)
+    ]

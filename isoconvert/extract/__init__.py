@@ -245,7 +245,10 @@ def resolve_level(volume: Volume, level: str, on_status: Callable[[str], None] |
     from ..stats import histogram, otsu_level
 
     if level.strip().lower() == "auto":
-        value = otsu_level(histogram(volume.samples))
+        try:
+            value = otsu_level(histogram(volume.samples))
+        except LevelError as exc:  # no level gives a surface: say so, invent none
+            raise LevelError(f"{volume.source}: --level auto: {exc}") from None
         if on_status:
             on_status(f"level auto: Otsu threshold {value:g}")
         return value

@@ -1,0 +1,210 @@
+"""Issue 20, "Smaller ones": info on volumes with no level, --plot formats, post-processing
+that empties a mesh, batch into its own input folder, and the contact sheet's counts."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from isoconvert.cli import main
+
+
+def run(capsys, *args):
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def one_line_error(code, err, *needles):
+    assert code == 1, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("isoconvert: error: ") and "Traceback" not in err
+    for needle in needles:
+        assert needle in lines[0], (needle, lines[0])
+    return lines[0]
+
+
+# --- info on a volume without a level -----------------------------------------------------
+
+
+def save(tmp_path, name, data):
+    path = tmp_path / name
+    np.save(path, data)
+    return path
+
+
+def numbers(text: str) -> list[float]:
+    return [float(t) for t in re.findall(r"-?\d+(?:\.\d+)?(?:e[+-]?\d+)?", text)]
+
+
+def test_info_on_an_all_nan_volume_invents_no_range(tmp_path, capsys):
+    path = save(tmp_path, "nan.npy", np.full((4, 4, 4), np.nan, np.float32))
+    code, out, _ = run(capsys, "info", path)
+    assert code == 0
+    assert "0 .. 1" not in out
+    assert "no finite samples" in out and "64" in out
+    # no row of a histogram (nothing to count) and no suggested levels
+    assert "suggested levels:" not in out
+    rows = out[out.index("histogram") :] if "histogram" in out else ""
+    assert " .. " not in rows
+    code, out, _ = run(capsys, "info", path, "--json")
+    info = json.loads(out)
+    assert info["min"] is None and info["max"] is None
+    assert info["nonfinite"] == 64 and info["suggested_levels"] == {}
+    assert "no finite samples" in info["no_levels_reason"]
+
+
+@pytest.mark.parametrize("dtype", ["uint8", "int16", "float32", "float64"])
+def test_info_on_a_constant_volume_suggests_no_level(tmp_path, capsys, dtype):
+    path = save(tmp_path, "c.npy", np.full((4, 5, 6), 7, dtype))
+    code, out, _ = run(capsys, "info", path)
+    assert code == 0
+    assert "all samples are 7: no isosurface at any level" in out
+    assert "suggested levels:" not in out
+    # the range is the samples' own, not a bin widened to 7 .. 8
+    assert "range     7 .. 7" in out
+    body = out[out.index("histogram") :]
+    assert all(v == 7 or v == 120 for v in numbers(body)), body  # 7, and 120 samples
+    code, out, _ = run(capsys, "info", path, "--json")
+    info = json.loads(out)
+    assert info["min"] == 7 and info["max"] == 7 and info["suggested_levels"] == {}
+    assert info["no_levels_reason"] == "all samples are 7: no isosurface at any level"
+    # and convert agrees there is none, with or without auto
+    for level in ("7", "auto"):
+        code, out, err = run(capsys, "convert", path, "-l", level, "-o", tmp_path / "c.ply")
+        one_line_error(code, err, "no isosurface")
+        assert "Otsu threshold" not in out + err
+
+
+def test_info_on_a_constant_volume_with_nan_says_what_nan_as_could_do(tmp_path, capsys):
+    data = np.full((4, 4, 4), 7.0, np.float32)
+    data[0, 0, :2] = np.nan
+    path = save(tmp_path, "cn.npy", data)
+    code, out, _ = run(capsys, "info", path, "--json")
+    info = json.loads(out)
+    assert info["min"] == 7 and info["max"] == 7 and info["nonfinite"] == 2
+    assert info["suggested_levels"] == {}
+    reason = info["no_levels_reason"]
+    assert "all 62 finite samples are 7" in reason and "2" in reason and "--nan-as" in reason
+    code, out, _ = run(capsys, "info", path)
+    assert code == 0 and reason in out and "suggested levels:" not in out
+    # auto has nothing to pick either (it used to say "Otsu threshold 7.5", of a made-up 8)
+    code, out, err = run(
+        capsys, "convert", path, "-l", "auto", "--nan-as", "0", "-o", tmp_path / "c.ply"
+    )
+    one_line_error(code, err, "cn.npy")
+    assert "7.5" not in out + err
+
+
+def test_convert_auto_on_an_all_nan_volume_invents_no_level(tmp_path, capsys):
+    path = save(tmp_path, "nan.npy", np.full((4, 4, 4), np.nan))
+    code, out, err = run(capsys, "convert", path, "-l", "auto", "-o", tmp_path / "n.ply")
+    one_line_error(code, err, "nan.npy", "no finite samples")
+    assert "Otsu threshold" not in out + err
+    assert not (tmp_path / "n.ply").exists()
+
+
+def two_valued(dtype, nan: bool) -> np.ndarray:
+    """(5, 5, 5): 7 everywhere but one 8 (and, for floats, two NaN samples)."""
+    data = np.full((5, 5, 5), 7, dtype)
+    data[2, 2, 2] = 8
+    if nan:
+        data[0, 0, 0] = data[4, 4, 4] = np.nan
+    return data
+
+
+@pytest.mark.parametrize(
+    "dtype, nan", [("uint8", False), ("int16", False), ("float32", False), ("float32", True)]
+)
+def test_every_suggested_level_is_one_convert_takes(tmp_path, capsys, dtype, nan):
+    """A property: each suggested level lies in (min, max] of the finite samples, so
+    convert makes a surface at it (here the closed surface around the one 8)."""
+    path = save(tmp_path, "v.npy", two_valued(dtype, nan))
+    code, out, _ = run(capsys, "info", path, "--json")
+    info = json.loads(out)
+    assert (info["min"], info["max"]) == (7, 8) and info["no_levels_reason"] is None
+    levels = info["suggested_levels"]
+    assert set(levels) == {"otsu", "p50", "p90", "p99"}
+    for name, level in levels.items():
+        assert 7 < level <= 8, (name, level)
+        out_path = tmp_path / f"{name}.ply"
+        extra = ["--nan-as", "0"] if nan else []
+        code, _, err = run(capsys, "convert", path, "-l", repr(level), "-o", out_path, *extra)
+        assert code == 0, err
+        import trimesh
+
+        mesh = trimesh.load(out_path, process=False)
+        assert len(mesh.faces) > 0 and mesh.is_watertight
+
+
+# --- info --plot writes the format its suffix names -----------------------------------------
+
+SVG_NS = "{http://www.w3.org/2000/svg}"
+
+
+def ball_npy(tmp_path, name="ball.npy"):
+    from conftest import ball
+
+    return save(tmp_path, name, ball(12, 4.0).astype(np.float32))
+
+
+def test_info_plot_svg_is_svg(tmp_path, capsys):
+    import xml.etree.ElementTree as ET
+
+    pytest.importorskip("matplotlib")
+    out = tmp_path / "p.svg"
+    code, _, err = run(capsys, "info", ball_npy(tmp_path), "--plot", out)
+    assert code == 0, err
+    assert not out.read_bytes().startswith(b"\x89PNG")
+    root = ET.parse(out).getroot()
+    assert root.tag == SVG_NS + "svg"
+    # drawn, not an empty frame: the slices are images, the contour paths
+    assert root.findall(f".//{SVG_NS}image") and root.findall(f".//{SVG_NS}path")
+
+
+def test_info_plot_pdf_and_png_are_what_they_say(tmp_path, capsys):
+    from PIL import Image
+
+    pytest.importorskip("matplotlib")
+    volume = ball_npy(tmp_path)
+    assert run(capsys, "info", volume, "--plot", tmp_path / "p.pdf")[0] == 0
+    assert (tmp_path / "p.pdf").read_bytes().startswith(b"%PDF-")
+    assert run(capsys, "info", volume, "--plot", tmp_path / "p.PNG")[0] == 0
+    assert (tmp_path / "p.PNG").read_bytes().startswith(b"\x89PNG\r\n\x1a\n")
+    with Image.open(tmp_path / "p.PNG") as image:
+        assert image.format == "PNG" and image.size[0] == 1000
+
+
+@pytest.mark.parametrize("name", ["p.jpg", "p.txt", "p"])
+def test_info_plot_refuses_a_suffix_it_cannot_write(tmp_path, capsys, name):
+    pytest.importorskip("matplotlib")
+    volume = ball_npy(tmp_path)
+    code, out, err = run(capsys, "info", volume, "--plot", tmp_path / name)
+    one_line_error(code, err, ".png, .svg, .pdf")
+    assert out == "" and sorted(p.name for p in tmp_path.iterdir()) == ["ball.npy"]
+
+
+def test_info_plot_of_a_constant_volume_draws_it_without_contour(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    from isoconvert import read_volume
+    from isoconvert.infoplot import write_info_plot
+
+    path = save(tmp_path, "c.npy", np.full((4, 5, 6), 7, np.uint8))
+    code, out, err = run(capsys, "info", path, "--plot", tmp_path / "c.png")
+    assert code == 0, err
+    assert "all samples are 7: no isosurface at any level" in out
+    plot = write_info_plot(read_volume(path), tmp_path / "d.png")
+    assert plot.level is None and plot.marked == {} and set(plot.segments.values()) == {0}
+    # asking for a level there is a one-line error naming why
+    code, _, err = run(capsys, "info", path, "--plot", tmp_path / "e.png", "--level", "7")
+    one_line_error(code, err, "no isosurface at any level")
+    assert not (tmp_path / "e.png").exists()
+    # and a volume without finite samples has nothing to draw
+    nan = save(tmp_path, "nan.npy", np.full((4, 4, 4), np.nan))
+    code, _, err = run(capsys, "info", nan, "--plot", tmp_path / "n.png")
+    one_line_error(code, err, "no finite samples")
+    assert not (tmp_path / "n.png").exists()
