@@ -399,3 +399,170 @@ def test_nifti_usable_sform_still_wins(tmp_path):
     expected = nib.affines.apply_affine(sform, _corners(data.shape))
     assert np.allclose(vol.index_to_world(_corners(vol.shape)), expected)
     assert "placement from the sform (sform_code 2)" in vol.notes
+
+
+# --- 4. DICOM without a usable PixelSpacing -------------------------------------------------
+
+
+def _drop_pixel_spacing(files: list[Path]) -> None:
+    import pydicom
+
+    for f in files:
+        ds = pydicom.dcmread(f)
+        del ds.PixelSpacing
+        ds.save_as(f)
+
+
+@pytest.mark.parametrize("spacing", [(0.0, 0.0), (0.0, 0.5), None])
+def test_dicom_without_pixel_spacing_takes_the_given_spacing(tmp_path, spacing):
+    pytest.importorskip("pydicom")
+    folder = tmp_path / "dicom"
+    files = _dicom_series(folder, spacing=spacing or (0.5, 0.25))
+    if spacing is None:
+        _drop_pixel_spacing(files)
+    vol = read_volume(folder, spacing=(0.7, 0.8, 2.0))
+    assert vol.spacing.tolist() == [0.7, 0.8, 2.0]
+    assert not any("PixelSpacing" in n or "set --spacing" in n for n in vol.notes)
+    # the placement otherwise comes from the files: origin and axes, values
+    assert vol.origin.tolist() == [0.0, 0.0, 0.0] and vol.frame == "LPS"
+    assert np.array_equal(vol.data, zyx_field(3, 4, 6, np.int16).T)
+    # without --spacing: 1 for x and y, a note naming the value; z from the positions
+    alone = read_volume(folder)
+    assert alone.spacing.tolist() == [1.0, 1.0, 2.0]
+    shown = "missing" if spacing is None else "[" + ", ".join(map(str, spacing)) + "]"
+    assert any(
+        n.startswith(f"PixelSpacing {shown} in ")
+        and n.endswith("using 1 for x and y; set --spacing")
+        for n in alone.notes
+    ), alone.notes
+
+
+def test_dicom_with_pixel_spacing_still_uses_it(tmp_path):
+    pytest.importorskip("pydicom")
+    vol = read_volume(_dicom_series(tmp_path / "dicom", spacing=(0.5, 0.25))[0].parent)
+    assert vol.spacing.tolist() == [0.25, 0.5, 2.0]
+    assert not any("PixelSpacing" in n for n in vol.notes)
+
+
+def test_dicom_multiframe_with_zero_pixel_spacing_takes_the_given_spacing(tmp_path):
+    pytest.importorskip("pydicom")
+    from test_dicom_multiframe import write_enhanced
+
+    frames = zyx_field(3, 4, 6, np.int16)
+    path = write_enhanced(
+        tmp_path / "enhanced.dcm", frames, [(0.0, 0.0, 1.5 * k) for k in range(3)], spacing=(0, 0)
+    )
+    vol = read_volume(path, spacing=(0.3, 0.4, 1.5))
+    assert vol.spacing.tolist() == [0.3, 0.4, 1.5]
+    assert np.array_equal(vol.data, frames.T)
+    assert not any("PixelSpacing" in n for n in vol.notes)
+    alone = read_volume(path)
+    assert alone.spacing.tolist() == [1.0, 1.0, 1.5]
+    assert (
+        "PixelSpacing [0.0, 0.0] of frame 1 (3 of 3 frames) is not two positive numbers; using 1 "
+        "for x and y; set --spacing"
+    ) in alone.notes
+
+
+# --- 7. no "set --spacing" once spacing is set ----------------------------------------------
+
+
+def _spacing_notes(vol) -> list[str]:
+    return [n for n in vol.notes if "spacing" in n.lower() and "command line" not in n]
+
+
+def _inputs_without_spacing(tmp_path) -> list[tuple[Path, dict]]:
+    """Files of every reader that says something about the spacing it lacks, and their
+    read options."""
+    tifffile = pytest.importorskip("tifffile")
+    data = zyx_field()
+    found = []
+    slices = tmp_path / "slices"
+    slices.mkdir()
+    for k in range(len(data)):
+        tifffile.imwrite(slices / f"s{k}.tif", data[k], photometric="minisblack")
+    found.append((slices, {}))
+    ij = tmp_path / "ij.tif"  # ImageJ z spacing 0 (ignored) and resolution tags
+    tifffile.imwrite(
+        ij, data, imagej=True, resolution=(2.0, 4.0), metadata={"axes": "ZYX", "spacing": 0}
+    )
+    found.append((ij, {}))
+    ome = tmp_path / "v.ome.tif"
+    tifffile.imwrite(
+        ome,
+        data,
+        ome=True,
+        metadata={"axes": "ZYX", "PhysicalSizeX": 0, "PhysicalSizeY": 1, "PhysicalSizeZ": 1},
+    )
+    found.append((ome, {}))
+    npy = tmp_path / "v.npy"
+    np.save(npy, data)
+    found.append((npy, {}))
+    header = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 5 3 4\nencoding: raw\n"
+    for name, extra in (("none", ""), ("nan", "spacings: nan 1 0\n")):
+        path = tmp_path / f"{name}.nrrd"
+        path.write_bytes((header + extra).encode() + b"\n" + data.tobytes())
+        found.append((path, {}))
+    common = "ObjectType = Image\nNDims = 3\nDimSize = 5 3 4\nElementType = MET_UCHAR\n"
+    for name, extra in (("none", ""), ("zero", "ElementSpacing = 0 1 1\n")):
+        path = tmp_path / f"{name}.mha"
+        path.write_bytes((common + extra + "ElementDataFile = LOCAL\n").encode() + data.tobytes())
+        found.append((path, {}))
+    zarr = pytest.importorskip("zarr")
+    store = tmp_path / "v.zarr"
+    zarr.save_array(str(store), data)
+    found.append((store, {}))
+    return found
+
+
+def test_no_missing_spacing_notes_when_spacing_is_given(tmp_path):
+    for path, options in _inputs_without_spacing(tmp_path):
+        alone = read_volume(path, **options)
+        assert any("--spacing" in n for n in alone.notes), (path, alone.notes)
+        given = read_volume(path, spacing=(0.5, 0.5, 2), **options)
+        assert given.spacing.tolist() == [0.5, 0.5, 2.0]
+        assert _spacing_notes(given) == [], (path, given.notes)
+        assert "spacing/origin set on the command line" in given.notes
+        # the notes that are not about spacing stay
+        assert [n for n in alone.notes if n not in _spacing_notes(alone)] == [
+            n for n in given.notes if "command line" not in n
+        ]
+
+
+def test_tiff_folder_note_goes_with_spacing(tmp_path):
+    """The issue's case: ``convert slices/ --spacing 0.5 0.5 2``."""
+    tifffile = pytest.importorskip("tifffile")
+    folder = tmp_path / "slices"
+    folder.mkdir()
+    for k in range(3):
+        tifffile.imwrite(folder / f"s{k}.tif", zyx_field()[k], photometric="minisblack")
+    assert any(n.startswith("no z spacing in the TIFF") for n in read_volume(folder).notes)
+    vol = read_volume(folder, spacing=(0.5, 0.5, 2))
+    assert not any("z spacing" in n for n in vol.notes)
+    assert vol.notes[0] == "3 slices, s0.tif .. s2.tif"
+
+
+def test_spacing_notes_stay_when_only_the_origin_is_given_and_origin_notes_go(tmp_path):
+    path = tmp_path / "v.nrrd"
+    path.write_bytes(
+        b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 5 3 4\nencoding: raw\n"
+        b"space origin: (1,2)\n\n" + zyx_field().tobytes()
+    )
+    alone = read_volume(path).notes
+    assert "space origin ignored (does not match the volume's axes)" in alone
+    assert "no spacing in the file; using 1 (set --spacing)" in alone
+    notes = read_volume(path, origin=(1, 2, 3)).notes
+    assert "no spacing in the file; using 1 (set --spacing)" in notes
+    assert not any("space origin" in n for n in notes)
+
+
+def test_placement_notes_pickle_as_they_are():
+    import pickle
+
+    from isoconvert.readers.options import PlacementNote, without_overridden
+
+    note = PlacementNote("spacing and origin from somewhere", "spacing origin")
+    again = pickle.loads(pickle.dumps(note))
+    assert again == note and again.about == {"spacing", "origin"}
+    assert without_overridden([note, "other"], {"spacing"}) == [note, "other"]
+    assert without_overridden([note, "other"], {"spacing", "origin"}) == ["other"]

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 from ..errors import FormatError, InputNotFoundError, IsoconvertError, VolumeError, one_line
 from ..lazy import LazyFunction
 from ..registry import Registry
-from .options import ReadOptions
+from .options import ReadOptions, without_overridden
 from .stacks import TIFF_SUFFIXES, is_zarr_store, natural_key
 
 if TYPE_CHECKING:
@@ -397,6 +397,9 @@ def read_volume(
         raise VolumeError(f"{spec}: the volume is empty (shape {volume.shape})")
     if spacing is not None or origin is not None:
         volume = volume.with_placement(spacing, origin)
+        # what the reader said about the spacing (or origin) it found is moot now
+        given = {name for name, v in (("spacing", spacing), ("origin", origin)) if v is not None}
+        volume.notes = without_overridden(volume.notes, given)
         volume.notes.append("spacing/origin set on the command line")
     return volume
 

@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import FormatError, VolumeError, one_line
 from ..grid import LazyGrid
 from ..volume import Volume
-from .options import ReadOptions, absolute_files
+from .options import ReadOptions, absolute_files, spacing_note
 
 #: relative and absolute (mm) tolerance of a slice gap against the median gap
 _GAP_RTOL = 0.01
@@ -80,6 +80,32 @@ def _floats(ds, keyword: str, n: int, path: Path) -> np.ndarray:
             "placed (is this a localizer or a non-image object? remove it from the folder)"
         )
     return out
+
+
+def _shown(value) -> str:
+    """A DICOM value for a note: "missing", or what it holds."""
+    if value is None:
+        return "missing"
+    try:
+        return "[" + ", ".join(str(v) for v in value) + "]"
+    except TypeError:
+        return repr(value)
+
+
+def _pixel_spacing(ds, name: str, notes: list[str]) -> np.ndarray:
+    """PixelSpacing [row spacing (y), column spacing (x)] of ``ds``; 1, 1 and a note
+    (that ``--spacing`` removes) when it is missing or not two positive numbers, so
+    that ``--spacing`` can always set it."""
+    spacing = _numbers(ds, "PixelSpacing", 2)
+    if spacing is not None and np.all(spacing > 0):
+        return spacing
+    notes.append(
+        spacing_note(
+            f"PixelSpacing {_shown(ds.get('PixelSpacing'))} in {name} is not two positive "
+            "numbers; using 1 for x and y; set --spacing"
+        )
+    )
+    return np.ones(2)
 
 
 def _is_multiframe(ds) -> bool:
@@ -279,7 +305,8 @@ def _series_volume(path: Path, items: list, notes: list[str]) -> Volume:
         raise FormatError(
             f"{f0}: ImageOrientationPatient {iop.tolist()} is not two orthogonal unit vectors"
         )
-    spacing_yx = _floats(ds0, "PixelSpacing", 2, f0)  # [row spacing (y), column spacing (x)]
+    # [row spacing (y), column spacing (x)]; 1, 1 and a note when missing or not positive
+    spacing_yx = _pixel_spacing(ds0, f0.name, notes)
     positions = []
     for f, ds in items:
         if (int(ds.Rows), int(ds.Columns)) != (rows, cols):
@@ -301,7 +328,7 @@ def _series_volume(path: Path, items: list, notes: list[str]) -> Volume:
     origin = _floats(items[0][1], "ImagePositionPatient", 3, items[0][0])
     if len(items) == 1:
         dz = float(items[0][1].get("SliceThickness", 1) or 1)
-        notes.append(f"one slice; z spacing {dz:g} from SliceThickness")
+        notes.append(spacing_note(f"one slice; z spacing {dz:g} from SliceThickness"))
     else:
         gaps = np.diff(pos)
         dup = np.flatnonzero(gaps <= _GAP_ATOL)
@@ -409,8 +436,8 @@ def _multiframe_volume(path: Path, f: Path, ds, notes: list[str]) -> Volume:
             raise missing(i, "ImageOrientationPatient", "PlaneOrientationSequence")
         item = _group_item(frame, shared, "PixelMeasuresSequence")
         spacing = _numbers(item if item is not None else ds, "PixelSpacing", 2)
-        if spacing is None:
-            raise missing(i, "PixelSpacing", "PixelMeasuresSequence")
+        if spacing is None or not np.all(spacing > 0):
+            spacing = np.full(2, np.nan)  # said once for all frames, below
         positions[i], orientations[i], spacings[i] = ipp, iop, spacing
         item = _group_item(frame, shared, "PixelValueTransformationSequence")
         rescale.append(_rescale_of(item, top))
@@ -432,6 +459,18 @@ def _multiframe_volume(path: Path, f: Path, ds, notes: list[str]) -> Volume:
         raise FormatError(
             f"{f}: ImageOrientationPatient {iop.tolist()} is not two orthogonal unit vectors"
         )
+    unplaced = np.flatnonzero(np.isnan(spacings[:, 0]))
+    if unplaced.size:
+        j = int(unplaced[0])
+        item = _group_item(per_frame[j], shared, "PixelMeasuresSequence")
+        value = (item if item is not None else ds).get("PixelSpacing")
+        notes.append(
+            spacing_note(
+                f"PixelSpacing {_shown(value)} of frame {j + 1} ({unplaced.size} of {n} frames) "
+                "is not two positive numbers; using 1 for x and y; set --spacing"
+            )
+        )
+        spacings[:] = 1.0
     odd = np.flatnonzero(np.any(np.abs(spacings - spacings[0]) > 1e-6 * spacings[0], axis=1))
     if odd.size:
         j = int(odd[0])
@@ -447,7 +486,7 @@ def _multiframe_volume(path: Path, f: Path, ds, notes: list[str]) -> Volume:
     if n == 1:
         item = _group_item(per_frame[0], shared, "PixelMeasuresSequence")
         dz = float((item if item is not None else ds).get("SliceThickness", 1) or 1)
-        notes.append(f"one frame; z spacing {dz:g} from SliceThickness")
+        notes.append(spacing_note(f"one frame; z spacing {dz:g} from SliceThickness"))
     else:
         gaps = np.diff(pos)
         same = int(np.count_nonzero(gaps <= _GAP_ATOL))

@@ -34,7 +34,7 @@ from ..grid import RawGrid, read_exactly
 from ..memory import check_fits
 from ..volume import Volume
 from .nrrd import _data_path, _Inflater, numbered_names
-from .options import ReadOptions, absolute_files, check_channel
+from .options import ReadOptions, absolute_files, check_channel, spacing_note
 
 _MAX_HEADER = 1 << 20  # bytes of header before ElementDataFile (a LIST's names excluded)
 _MAX_LIST = 64 << 20  # bytes of a LIST of file names
@@ -245,10 +245,14 @@ def _spacing(header: _Header, ndims: int, notes: list[str]):
     keys = ("ElementSpacing",) if header.get("ElementSpacing") else ("ElementSize",)
     values = header.numbers(keys, ndims)
     if values is None:
-        notes.append("no spacing in the file; using 1 (set --spacing)")
+        notes.append(spacing_note("no spacing in the file; using 1 (set --spacing)"))
         return None
     if not all(np.isfinite(v) and v > 0 for v in values):
-        notes.append(f"{keys[0]} {values} in the MetaImage header ignored; using 1; set --spacing")
+        notes.append(
+            spacing_note(
+                f"{keys[0]} {values} in the MetaImage header ignored; using 1; set --spacing"
+            )
+        )
         return None
     return values
 

@@ -30,7 +30,13 @@ from ..errors import FormatError, VolumeError, one_line
 from ..grid import LazyGrid, RawGrid, read_exactly
 from ..memory import check_fits
 from ..volume import Volume
-from .options import ReadOptions, absolute_files, select_channel
+from .options import (
+    ReadOptions,
+    absolute_files,
+    origin_note,
+    select_channel,
+    spacing_note,
+)
 
 # "data file: <format> <min> <max> <step> [<subdim>]" (NRRD spec, detached headers)
 _MULTI_FILE = re.compile(r"^(\S*%\S*)\s+(-?\d+)\s+(-?\d+)\s+(-?\d+)(?:\s+(\d+))?$")
@@ -101,7 +107,7 @@ def read_nrrd(path: Path, options: ReadOptions) -> Volume:
     if origin is not None:
         origin = np.asarray(origin, dtype=np.float64)
         if origin.shape != (len(domain),) or not np.all(np.isfinite(origin)):
-            notes.append("space origin ignored (does not match the volume's axes)")
+            notes.append(origin_note("space origin ignored (does not match the volume's axes)"))
             origin = None
     if "space" in header:
         notes.append(f"coordinates in the file's {header['space']} space")
@@ -861,9 +867,11 @@ def _placement(header: dict, domain: list[int]):
                 spacing[axis] = value
             else:
                 notes.append(
-                    f"spacings {value:g} for axis {'xyz'[axis]} in the NRRD header ignored; "
-                    "using 1; set --spacing"
+                    spacing_note(
+                        f"spacings {value:g} for axis {'xyz'[axis]} in the NRRD header ignored; "
+                        "using 1; set --spacing"
+                    )
                 )
         return spacing, None, notes
-    notes.append("no spacing in the file; using 1 (set --spacing)")
+    notes.append(spacing_note("no spacing in the file; using 1 (set --spacing)"))
     return None, None, notes

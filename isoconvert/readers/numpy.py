@@ -27,9 +27,9 @@ from ..errors import FormatError, VolumeError, one_line
 from ..grid import RawGrid
 from ..memory import check_fits
 from ..volume import Volume
-from .options import ReadOptions, absolute_files
+from .options import ReadOptions, absolute_files, spacing_note
 
-_SPACING_NOTE = "no spacing in a NumPy file; using 1 on every axis; set --spacing"
+_SPACING_NOTE = spacing_note("no spacing in a NumPy file; using 1 on every axis; set --spacing")
 _SAVE_HINT = "save a (z, y, x) volume or a (y, x) image with np.save"
 
 

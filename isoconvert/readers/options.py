@@ -72,6 +72,48 @@ class ReadOptions:
         return {f.name for f in fields(self) if getattr(self, f.name) != getattr(default, f.name)}
 
 
+class PlacementNote(str):
+    """A reader's note about the spacing or origin of a volume (missing from the file,
+    ignored as unusable, or where it came from), which the user may set instead.
+
+    :func:`~isoconvert.readers.read_volume` drops it when they do
+    (``--spacing``, ``--origin``): "no spacing in the file; set --spacing" is no
+    longer true once they have. A ``str`` like any other note.
+
+    Attributes
+    ----------
+    about : frozenset of str
+        What the note is about, "spacing" and/or "origin": the note goes when
+        every one of them is set by the user.
+    """
+
+    about: frozenset[str]
+
+    def __new__(cls, text: str, about: str = "spacing") -> PlacementNote:
+        note = super().__new__(cls, text)
+        note.about = frozenset(about.split())
+        return note
+
+    def __reduce__(self):
+        return (PlacementNote, (str(self), " ".join(sorted(self.about))))
+
+
+def spacing_note(text: str) -> PlacementNote:
+    """A note about the spacing alone (see :class:`PlacementNote`)."""
+    return PlacementNote(text, "spacing")
+
+
+def origin_note(text: str) -> PlacementNote:
+    """A note about the origin alone (see :class:`PlacementNote`)."""
+    return PlacementNote(text, "origin")
+
+
+def without_overridden(notes: list[str], given: set[str]) -> list[str]:
+    """``notes`` less the :class:`PlacementNote` s about only what the user set
+    (``given``: "spacing", "origin")."""
+    return [n for n in notes if not (isinstance(n, PlacementNote) and n.about <= given)]
+
+
 def absolute_files(paths: Iterable[str | Path]) -> tuple[str, ...]:
     """The files a volume is read from, for :attr:`Volume.files`: absolute, in order,
     each once.

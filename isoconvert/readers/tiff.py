@@ -22,7 +22,7 @@ from ..errors import FormatError, InputNotFoundError, VolumeError, one_line
 from ..grid import LazyGrid
 from ..memory import check_fits
 from ..volume import Volume
-from .options import ReadOptions, absolute_files, check_channel
+from .options import ReadOptions, absolute_files, check_channel, spacing_note
 from .stacks import TIFF_SUFFIXES, natural_key
 
 _CHANNELS = "channels (RGB or multi-channel)"
@@ -465,7 +465,7 @@ def _spacing(tif, ndim: int) -> tuple[np.ndarray | None, str | None, list[str]]:
     notes: list[str] = []
     ome = _ome_spacing(tif, ndim, notes)
     if ome is not None:
-        notes.append("spacing from OME metadata")
+        notes.append(spacing_note("spacing from OME metadata"))
         return ome[0], ome[1], notes
     page = tif.pages[0]
     xy = _resolution_spacing(page, notes)
@@ -477,7 +477,7 @@ def _spacing(tif, ndim: int) -> tuple[np.ndarray | None, str | None, list[str]]:
             unit = None
     if ndim == 2:
         if xy is not None:
-            notes.append("spacing from the TIFF resolution tags")
+            notes.append(spacing_note("spacing from the TIFF resolution tags"))
             return np.array(xy), unit, notes
         return None, None, notes
     raw_z = ij.get("spacing")
@@ -485,15 +485,17 @@ def _spacing(tif, ndim: int) -> tuple[np.ndarray | None, str | None, list[str]]:
         z = _positive(raw_z)
         if z is None:
             notes.append(
-                f"spacing {_show(raw_z)} in the ImageJ metadata ignored; using 1; set --spacing"
+                spacing_note(
+                    f"spacing {_show(raw_z)} in the ImageJ metadata ignored; using 1; set --spacing"
+                )
             )
             z = 1.0
         else:
-            notes.append("spacing from ImageJ metadata")
+            notes.append(spacing_note("spacing from ImageJ metadata"))
         xy = xy if xy is not None else (1.0, 1.0)
         return np.array([xy[0], xy[1], z]), unit, notes
     found = f" (resolution tags give x, y spacing {xy[0]:g}, {xy[1]:g})" if xy else ""
-    notes.append(f"no z spacing in the TIFF; using 1, 1, 1{found}; set --spacing")
+    notes.append(spacing_note(f"no z spacing in the TIFF; using 1, 1, 1{found}; set --spacing"))
     return None, None, notes
 
 
@@ -530,7 +532,9 @@ def _resolution_spacing(page, notes: list[str]) -> tuple[float, float] | None:
         except (TypeError, ValueError, ZeroDivisionError, OverflowError):
             num, den, spacing = tag.value, 1, None
         if spacing is None:
-            notes.append(f"{name} {num}/{den} in the TIFF tags ignored; using 1; set --spacing")
+            notes.append(
+                spacing_note(f"{name} {num}/{den} in the TIFF tags ignored; using 1; set --spacing")
+            )
             spacing = 1.0
         values.append(spacing)
     return values[0], values[1]
@@ -558,7 +562,9 @@ def _ome_spacing(tif, ndim: int, notes: list[str]):
         number = _positive(value)
         if number is None:
             notes.append(
-                f"{name} {_show(value)} in the OME metadata ignored; using 1; set --spacing"
+                spacing_note(
+                    f"{name} {_show(value)} in the OME metadata ignored; using 1; set --spacing"
+                )
             )
             number = 1.0
         spacing.append(number)

@@ -26,7 +26,13 @@ import numpy as np
 from ..errors import FormatError, VolumeError, one_line
 from ..grid import LazyGrid
 from ..volume import Volume
-from .options import ReadOptions, absolute_files, check_channel
+from .options import (
+    PlacementNote,
+    ReadOptions,
+    absolute_files,
+    check_channel,
+    spacing_note,
+)
 from .stacks import is_zarr_store
 
 # Arrays of at most this many stored chunks (or shards) are checked for missing ones when
@@ -248,9 +254,13 @@ def _transform(transforms: list, ndim: int, notes: list[str]) -> tuple[np.ndarra
         except (KeyError, TypeError, ValueError):
             values = None  # a transformation stored in a binary "path" is not read
         if values is None or values.shape != (ndim,) or not np.all(np.isfinite(values)):
+            about, flag = ("spacing", "--spacing") if kind == "scale" else ("origin", "--origin")
             notes.append(
-                f"OME-Zarr {kind} {t.get(kind, t.get('path'))!r} ignored (not one "
-                f"finite number per axis); set --spacing / --origin"
+                PlacementNote(
+                    f"OME-Zarr {kind} {t.get(kind, t.get('path'))!r} ignored (not one "
+                    f"finite number per axis); set {flag}",
+                    about,
+                )
             )
             continue
         if kind == "scale":
@@ -283,10 +293,14 @@ def _volume(path, array_path, array, axes, scale, shift, notes, options) -> Volu
     xyz = spatial[::-1]  # arrays hold (z,) y, x; a Volume's vectors are (x, y(, z))
     spacing = origin = None
     if scale is None:
-        notes.append("no spacing in the store; using 1 (set --spacing)")
+        notes.append(spacing_note("no spacing in the store; using 1 (set --spacing)"))
     else:
         spacing, origin = _placement(scale[xyz], shift[xyz], [axes[i][0] for i in xyz], notes)
-        notes.append("spacing and origin from the OME-Zarr coordinateTransformations")
+        notes.append(
+            PlacementNote(
+                "spacing and origin from the OME-Zarr coordinateTransformations", "spacing origin"
+            )
+        )
     units = [axes[i][2] for i in xyz]
     unit = units[0] if len(set(units)) == 1 else None
     if len(set(units)) > 1:
@@ -338,7 +352,10 @@ def _placement(scale, shift, names, notes) -> tuple[np.ndarray, np.ndarray]:
     for axis, value in enumerate(scale):
         if not value > 0:
             notes.append(
-                f"OME-Zarr scale {value:g} for axis {names[axis]} ignored; using 1; set --spacing"
+                spacing_note(
+                    f"OME-Zarr scale {value:g} for axis {names[axis]} ignored; using 1; "
+                    "set --spacing"
+                )
             )
             spacing[axis] = 1.0
     return spacing, np.asarray(shift, dtype=np.float64)
