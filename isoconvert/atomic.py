@@ -5,15 +5,23 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import re
+import shutil
+import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import BinaryIO
 
 from .errors import OutputError
 
 
-def check_output(path: str | Path, force: bool = False, example: str = "mesh.ply") -> Path:
+def check_output(
+    path: str | Path,
+    force: bool = False,
+    example: str = "mesh.ply",
+    inputs: Iterable[str | Path] = (),
+) -> Path:
     """Fail early, before any work, when ``path`` cannot be written.
 
     Parameters
@@ -23,15 +31,23 @@ def check_output(path: str | Path, force: bool = False, example: str = "mesh.ply
         An existing file may be replaced.
     example : str
         A file name to suggest when ``path`` is a folder.
+    inputs : iterable of str or Path
+        The files (and folders) the run reads: ``path`` must be none of them,
+        by device and inode, so no symlink or hard link hides one.
 
     Raises
     ------
     OutputError
         The folder is missing or not writable, the path is a folder or a special
-        file (device, FIFO, socket), or the file exists and ``force`` is False.
+        file (a block device, a socket), its name is too long for the folder,
+        it is one of ``inputs``, or the file exists and ``force`` is False.
     """
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
+    _check_name_length(path, folder)  # first: stat() of too long a name raises
+    refuse_inputs(path, inputs)
+    if output_stream(path) is not None:
+        return path  # written in place: nothing is replaced (see atomic_output)
     if path.is_dir():
         raise OutputError(f"{path}: is a folder; give an output file name such as {path}/{example}")
     if not folder.is_dir():
@@ -40,12 +56,18 @@ def check_output(path: str | Path, force: bool = False, example: str = "mesh.ply
         raise OutputError(
             f"{path}: cannot write to the folder {folder} (permission denied); choose another -o"
         )
-    if path.exists() and not path.is_file():
-        # A device, FIFO or socket: renaming a file over it would replace it
-        # (as root, /dev/null itself); isoconvert writes regular files only.
+    if stat.S_ISFIFO(_mode(path)):
         raise OutputError(
-            f"{path}: is not a regular file (a device, pipe or socket); "
-            "isoconvert writes regular files only, choose a file name"
+            f"{path}: is a named pipe (writing would wait for a reader); name a file, "
+            f"or /dev/stdout with the shell's > {path}"
+        )
+    if os.path.lexists(path) and not path.is_file():
+        # A device or socket (or a symlink into /dev, /proc): renaming a file over it
+        # would replace it (as root, the device node itself).
+        raise OutputError(
+            f"{path}: is not a regular file (a device, socket or link to one); "
+            "isoconvert writes regular files, pipes and its standard output only; "
+            "choose a file name"
         )
     if path.exists() and not force:
         raise OutputError(f"{path}: already exists; pass --force to overwrite it")
@@ -63,41 +85,239 @@ def check_output(path: str | Path, force: bool = False, example: str = "mesh.ply
     return path
 
 
+def refuse_inputs(path: str | Path, inputs: Iterable[str | Path]) -> None:
+    """Raise OutputError when writing ``path`` would replace a file being read.
+
+    Files are compared by device and inode (through symlinks and hard links).
+    A folder in ``inputs`` stands for every file in it (a Zarr store's
+    metadata and chunks): an existing file inside it is refused too.
+
+    Parameters
+    ----------
+    path : str or Path
+        The output.
+    inputs : iterable of str or Path
+        Every file and folder the run reads.
+    """
+    path = Path(path)
+    target = _identity(path)
+    if target is None:
+        return
+    real = Path(os.path.realpath(path))
+    for source in inputs:
+        source = Path(source)
+        if _identity(source) == target:
+            same_name = os.path.abspath(source) == os.path.abspath(path)
+            what = "the input" if same_name else f"a file the input reads ({source})"
+            raise OutputError(f"{path}: is {what}; writing it would destroy it, choose another -o")
+        if source.is_dir() and real.is_relative_to(os.path.realpath(source)) and path.is_file():
+            raise OutputError(
+                f"{path}: lies inside {source}, which is being read; choose another -o"
+            )
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    """(device, inode) of the file ``path`` names, following symlinks; None when
+    there is none."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return st.st_dev, st.st_ino
+
+
+def _check_name_length(path: Path, folder: Path) -> None:
+    """Raise OutputError when the file system cannot hold a file of this name."""
+    limit = _name_max(folder)
+    size = len(os.fsencode(path.name))
+    if size > limit:
+        raise OutputError(
+            f"{path}: the file name is {size} bytes, longer than the {limit} the folder "
+            "allows; choose a shorter name"
+        )
+    whole = len(os.fsencode(os.path.abspath(path)))
+    if whole >= 4096:  # PATH_MAX on Linux, and longer than macOS's and Windows' limits
+        raise OutputError(f"{str(path)[:60]}...: the path is {whole} bytes; choose a shorter one")
+
+
+def _mode(path: Path) -> int:
+    """The st_mode of what ``path`` names (following symlinks), 0 when nothing."""
+    try:
+        return os.stat(path).st_mode
+    except (OSError, ValueError):
+        return 0
+
+
+def _name_max(folder: Path) -> int:
+    """The longest file name, in bytes, the file system of ``folder`` takes."""
+    try:
+        return int(os.pathconf(folder, "PC_NAME_MAX"))
+    except (OSError, ValueError):
+        return 255
+
+
+_FD_PATH = re.compile(r"^/(?:proc/self|dev)/fd/(\d+)$")
+_STD_STREAMS = {"/dev/stdout": 1, "/dev/stderr": 2}
+#: character devices written in place: the null device and terminals
+_WRITABLE_DEVICES = re.compile(r"^/dev/(?:null|tty\w*|pts/\d+)$")
+
+
+def output_stream(path: str | Path) -> int | str | None:
+    """What ``-o PATH`` means when it names a stream rather than a file.
+
+    ``/dev/stdout``, ``/dev/stderr`` and ``/dev/fd/N`` (``/proc/self/fd/N``),
+    through any symlinks, mean the process's open file descriptor N: returns
+    N, and the output goes wherever the shell sent it (a pipe, a terminal, a
+    redirected file). ``/dev/null`` or a terminal is written in place: returns
+    its path. Anything else (a regular file, a new name, a named pipe, which
+    would block with no reader, a block device) returns None.
+    """
+    text = os.path.abspath(os.fspath(path))
+    for _ in range(40):  # symlink hops
+        if text in _STD_STREAMS:
+            return _STD_STREAMS[text]
+        found = _FD_PATH.match(text)
+        if found:
+            return int(found.group(1))
+        if not os.path.islink(text):
+            break
+        text = os.path.normpath(os.path.join(os.path.dirname(text), os.readlink(text)))
+    try:
+        mode = os.stat(text).st_mode
+    except (OSError, ValueError):
+        return None
+    if stat.S_ISCHR(mode) and _WRITABLE_DEVICES.match(text):
+        return text
+    return None
+
+
 @contextlib.contextmanager
 def atomic_output(
-    path: str | Path, force: bool = False, example: str = "mesh.ply"
+    path: str | Path,
+    force: bool = False,
+    example: str = "mesh.ply",
+    inputs: Iterable[str | Path] = (),
 ) -> Iterator[BinaryIO]:
     """Open a temporary file beside ``path``; rename it to ``path`` on success.
 
     On any exception (including KeyboardInterrupt) the temporary file is
-    removed, so a failed run leaves no partial output behind. ``example`` is as
-    for :func:`check_output`.
+    removed, so a failed run leaves no partial output behind. ``example`` and
+    ``inputs`` are as for :func:`check_output`.
+
+    A ``path`` naming a stream (:func:`output_stream`: standard output, a
+    pipe, ``/dev/null``) is written in place, never replaced: the output is
+    written to a temporary file first and copied to the stream once complete,
+    so a failed run sends nothing, and writers may seek.
     """
-    path = check_output(path, force, example)
+    path = check_output(path, force, example, inputs)
+    stream = output_stream(path)
+    folder = tempfile.gettempdir() if stream is not None else path.parent
+    # the temporary name always fits the folder's limit, however long the user's is
+    keep = _name_max(Path(folder)) - len(".") - len(".XXXXXXXX.part") - 8
+    stem = os.fsencode(path.name)[: max(keep, 1)].decode("utf-8", "ignore") or "out"
     try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{stem}.", suffix=".part")
     except OSError as exc:
         raise OutputError(f"{path}: cannot create a file there ({exc.strerror})") from None
     try:
-        with os.fdopen(fd, "wb") as fh:
+        with os.fdopen(fd, "w+b") as fh:
             yield fh
-        # mkstemp makes the file private (0600); give it the permissions a plain open would
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        if path.exists() and (not force or not path.is_file()):
-            raise OutputError(f"{path}: appeared while writing; choose another name or retry")
-        os.replace(tmp, path)
+            if stream is not None:
+                fh.seek(0)
+                _copy_to_stream(fh, stream)
+        if stream is None:
+            # mkstemp makes the file private (0600); give it the permissions a plain open would
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)
+            if path.exists() and (not force or not path.is_file()):
+                raise OutputError(f"{path}: appeared while writing; choose another name or retry")
+            os.replace(tmp, path)
+        else:
+            _remove(tmp)
     except OSError as exc:
+        written = _size(tmp)
         _remove(tmp)
-        if exc.errno == errno.ENOSPC:
-            raise OutputError(f"{path}: the disk is full; free space or write elsewhere") from None
+        if exc.errno in DISK_FULL_ERRNOS:
+            # what was written when the disk filled is a lower bound of the need
+            raise disk_full_error(path, written, more=True) from None
+        if exc.errno == errno.EPIPE:
+            raise OutputError(f"{path}: the reading end of the pipe closed early") from None
         raise OutputError(f"{path}: writing failed ({exc.strerror or exc})") from None
     except BaseException:
         _remove(tmp)
         raise
 
 
+def _copy_to_stream(source: BinaryIO, stream: int | str) -> None:
+    """Copy a finished temporary file to a file descriptor or a stream's path."""
+    if isinstance(stream, int):
+        with os.fdopen(os.dup(stream), "wb") as out:
+            shutil.copyfileobj(source, out, 1 << 20)
+    else:
+        with open(stream, "wb") as out:
+            shutil.copyfileobj(source, out, 1 << 20)
+
+
 def _remove(tmp: str) -> None:
     with contextlib.suppress(FileNotFoundError):
         os.unlink(tmp)
+
+
+#: errno values that mean "no room": the device is full, or the user's quota is.
+DISK_FULL_ERRNOS = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None)) if e)
+
+
+def free_space(path: str | Path) -> int | None:
+    """Bytes an unprivileged user may still write on the file system of
+    ``path`` (a file, or its nearest existing folder), or None when unknown."""
+    path = Path(os.path.abspath(path))
+    for candidate in (path, *path.parents):
+        try:
+            st = os.statvfs(candidate)
+        except OSError:
+            continue
+        return st.f_bavail * st.f_frsize
+    return None
+
+
+class DiskFullError(OutputError):
+    """No room left at :attr:`path` for :attr:`needs` bytes (or more)."""
+
+    def __init__(self, message: str, path: str | Path, needs: int) -> None:
+        super().__init__(message)
+        self.path = path
+        self.needs = needs
+
+
+def disk_full_error(
+    path: str | Path, needs: int, more: bool = False, why: str = ""
+) -> DiskFullError:
+    """The one-line error of a write that found no room at ``path``.
+
+    ``disk full at PATH (needs N MiB, M MiB free)``, ``why`` (what was being
+    written) and the fix. ``more`` says that ``needs`` is a lower bound (what
+    had been written when the disk filled). The free space is measured now:
+    call this once the partial file is gone.
+    """
+    free = free_space(path)
+    parts = [f"needs {'more than ' if more else ''}{_mib(needs)}"] if needs > 0 else []
+    parts += [f"{_mib(free)} free"] if free is not None else []
+    told = f" ({', '.join(parts)})" if parts else ""
+    return DiskFullError(
+        f"disk full at {path}{told}{' ' + why if why else ''}; free space there or write elsewhere",
+        path,
+        needs,
+    )
+
+
+def _mib(n: int) -> str:
+    return f"{n / 2**20:.1f} MiB"
+
+
+def _size(tmp: str) -> int:
+    """Bytes in the temporary file ``tmp`` (0 when it is gone)."""
+    try:
+        return os.stat(tmp).st_size
+    except OSError:
+        return 0

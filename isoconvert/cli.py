@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import sys
 import time
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext, redirect_stdout
 from enum import Enum
 from pathlib import Path
 from typing import Annotated
@@ -340,12 +340,10 @@ def _stage_display(quiet: bool, verbose: bool = False):
         yield None, None
         return
     if verbose or not _interactive():
-        start = time.perf_counter()
-
-        def stage_line(stage: str) -> None:
-            print(f"{time.perf_counter() - start:7.2f} s  {stage}", file=sys.stderr)
-
-        yield (stage_line if verbose else None), _status(quiet)
+        clock = _StageClock() if verbose else None
+        yield (clock.start if clock else None), _status(quiet)
+        if clock:
+            clock.finish()
         return
     from rich.console import Console
 
@@ -356,6 +354,25 @@ def _stage_display(quiet: bool, verbose: bool = False):
             console.print(message, markup=False, highlight=False)
 
         yield (lambda stage: status.update(f"{stage}...")), on_status
+
+
+class _StageClock:
+    """--verbose: one line per stage with the time it took, as it ends, then the
+    total, so that the lines add up to the run."""
+
+    def __init__(self) -> None:
+        self.began = self.since = time.perf_counter()
+        self.stage: str | None = None
+
+    def start(self, stage: str) -> None:
+        now = time.perf_counter()
+        if self.stage is not None:
+            print(f"{now - self.since:7.2f} s  {self.stage}", file=sys.stderr)
+        self.stage, self.since = stage, now
+
+    def finish(self) -> None:
+        self.start("")  # the line of the last stage
+        print(f"{time.perf_counter() - self.began:7.2f} s  in all", file=sys.stderr)
 
 
 def _status(quiet: bool):
@@ -438,19 +455,36 @@ def _main(
         raise typer.Exit()
 
 
+def _check_levels(values: list[str] | None) -> list[str] | None:
+    """--level values are numbers or 'auto': a word is a command line that cannot be
+    parsed (exit 2, as for every other number option)."""
+    for text in values or ():
+        if text.strip().lower() != "auto":
+            try:
+                float(text)
+            except ValueError:
+                raise typer.BadParameter(f"a number or 'auto', got {text!r}") from None
+    return values
+
+
+LevelOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--level",
+        "-l",
+        metavar="<number|auto>",
+        callback=_check_levels,
+        help="Isovalue, or 'auto' (Otsu's threshold; in batch, each file's own); several "
+        "--level write one mesh each (NAME_levelL.ply).",
+    ),
+]
+
+
 @app.command(cls=_Command)
 def convert(
     input: Annotated[str, typer.Argument(help="Volume file, folder of TIFF slices, or glob.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Mesh file to write.")],
-    level: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--level",
-            "-l",
-            help="Isovalue, or 'auto' for Otsu's threshold; several --level write one mesh "
-            "each (NAME_levelL.ply).",
-        ),
-    ] = None,
+    level: LevelOpt = None,
     method: Annotated[
         str | None,
         typer.Option(
@@ -613,6 +647,10 @@ def convert(
 
         require_renderer()
         check_picture_output(preview, force)
+    # reports and pictures must not replace an input's file either
+    also_writes = [*(reports or ()), *([preview] if preview is not None else ())]
+    if labels and report not in (None, "-"):
+        also_writes.append(report)
     start = time.perf_counter()
     with _stage_display(quiet, verbose) as (on_progress, on_status):
         if labels:
@@ -628,6 +666,7 @@ def convert(
             input,
             output,
             first,
+            also_writes=also_writes,
             **extra,
             method=method,
             format=format,
@@ -806,7 +845,9 @@ def _report_result(result, target, required, examples, force, quiet) -> list[str
 
 @app.command(cls=_Command)
 def check(
-    mesh_file: Annotated[Path, typer.Argument(help="OBJ, PLY or STL file to check.")],
+    mesh_file: Annotated[
+        Path, typer.Argument(help="PLY, OBJ, OFF, STL, VTP, GLB or 3MF file to check.")
+    ],
     require: RequireOpt = None,
     as_json: Annotated[bool, _flag("--json", help="Print JSON instead of a table.")] = False,
     report: Annotated[
@@ -842,7 +883,7 @@ def check(
     from .report import check_mesh, grid_from_volume, parse_requirements
 
     required = parse_requirements(require)
-    frame = None
+    frame = grid_files = None
     if grid is not None:
         from .readers import read_volume
 
@@ -857,11 +898,16 @@ def check(
             origin,
             allow_outside_data,
         )
-        frame = grid_from_volume(read_volume(grid, format=kwargs.pop("input_format"), **kwargs))
+        grid_volume = read_volume(grid, format=kwargs.pop("input_format"), **kwargs)
+        grid_files = grid_volume.files
+        frame = grid_from_volume(grid_volume)
+    if report is not None and report != "-":  # before reading: a bad name must not cost a check
+        read = [mesh_file, *(grid_files or ())]
+        check_output(report, force, "report.txt", inputs=read)
     mesh = read_mesh(mesh_file)
     checked = check_mesh(mesh, examples=examples, source=str(mesh_file), grid=frame)
     if report is not None and report != "-":
-        _emit_report(checked, report, [], as_json=False, force=force, quiet=True)
+        _emit_report(checked, report, [], as_json=False, force=force, quiet=True, inputs=read)
     _emit_report(checked, "-", required, as_json=as_json, force=force, quiet=quiet)
 
 
@@ -891,7 +937,9 @@ def preview(
         print(f"wrote {output}: {what} marked ({time.perf_counter() - start:.2f} s)")
 
 
-def _emit_report(checked, target, required, *, as_json, force, quiet, changed=None) -> None:
+def _emit_report(
+    checked, target, required, *, as_json, force, quiet, changed=None, inputs=()
+) -> None:
     """Print the report (target "-") or write it to a file (JSON when its name ends in
     .json, else the printed table), with what post-processing ``changed`` (lines) in
     the file; exit 4 when a required check fails."""
@@ -909,7 +957,7 @@ def _emit_report(checked, target, required, *, as_json, force, quiet, changed=No
             text = format_report(checked)
             if changed is not None:
                 text += "\n\npost-processing changed:\n" + "\n".join(f"  {c}" for c in changed)
-        with atomic_output(target, force, "report.txt") as fh:
+        with atomic_output(target, force, "report.txt", inputs) as fh:
             fh.write((text + "\n").encode("utf-8"))
     elif target == "-" and not quiet:
         print(json.dumps(checked.to_dict(), indent=2) if as_json else format_report(checked))
@@ -926,15 +974,7 @@ def _emit_report(checked, target, required, *, as_json, force, quiet, changed=No
 def batch(
     inputs: Annotated[list[str], typer.Argument(help="Files, folders or globs of volumes.")],
     out_dir: Annotated[Path, typer.Option("-o", "--output", help="Folder for the meshes.")],
-    level: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--level",
-            "-l",
-            help="Isovalue for all, or 'auto' (Otsu); several --level write one mesh each "
-            "(NAME_levelL.ply).",
-        ),
-    ] = None,
+    level: LevelOpt = None,
     levels: Annotated[
         Path | None,
         typer.Option(help="TOML or CSV mapping of path patterns to level and read options."),
@@ -1344,7 +1384,7 @@ def info(
         # --plot fails at once
         require_matplotlib()
         plot_format(plot)
-        check_output(plot, force, "info.png")
+        check_output(plot, force, "info.png", inputs=[input] if Path(input).is_file() else [])
     elif plot_level is not None:
         raise VolumeError("--level is for --plot (the contour drawn on the slices); add --plot")
     from .stats import histogram, no_levels_reason, suggested_levels, text_histogram
@@ -1503,6 +1543,23 @@ def gather_multi_values(argv: list[str]) -> list[str]:
     return out
 
 
+#: options whose value is a file isoconvert writes
+_OUTPUT_OPTIONS = ("-o", "--output", "--report", "--plot", "--preview", "--summary")
+
+
+def _writes_to_stdout(args: list[str]) -> bool:
+    """Whether an output option names standard output (``-o /dev/stdout``)."""
+    from .atomic import output_stream
+
+    for n, token in enumerate(args):
+        name, _, value = token.partition("=")
+        if name in _OUTPUT_OPTIONS:
+            value = value or (args[n + 1] if n + 1 < len(args) else "")
+            if value and output_stream(value) == 1:
+                return True
+    return False
+
+
 def _is_number(text: str) -> bool:
     try:
         float(text.replace("x", "e") if "x" in text else text)
@@ -1512,34 +1569,62 @@ def _is_number(text: str) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``isoconvert`` command; returns the exit code."""
+    """Entry point of the ``isoconvert`` command; returns the exit code.
+
+    SIGTERM and SIGHUP stop a run as Ctrl-C does (:mod:`isoconvert.signals`):
+    partial output is removed, one line says so, and the exit code is 128 +
+    the signal number (130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP).
+    """
+    from . import signals
+
+    with signals.handled():
+        return _main(argv)
+
+
+def _interrupted() -> int:
+    """Say that the run was stopped, in one line; the exit code, 128 + the signal."""
+    import contextlib
+    import signal
+
+    from . import signals
+
+    signum = signals.received()
+    by = f" ({signals.signal_name(signum)})" if signum else ""
+    with contextlib.suppress(OSError, ValueError):  # SIGHUP: the terminal may be gone
+        print(f"isoconvert: interrupted{by}; no partial output was left", file=sys.stderr)
+    return 128 + (signum or signal.SIGINT)
+
+
+def _main(argv: list[str] | None) -> int:
     global _show_third_party
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     _show_third_party = debug  # numpy warnings and tifffile's log lines are not for users
     args = gather_multi_values([a for a in args if a != "--debug"])
+    # a mesh sent to standard output must not have messages mixed into it
+    talk = redirect_stdout(sys.stderr) if _writes_to_stdout(args) else nullcontext()
     try:
-        result = app(args=args, prog_name="isoconvert", standalone_mode=False)
+        with talk:
+            result = app(args=args, prog_name="isoconvert", standalone_mode=False)
         code = result if isinstance(result, int) else 0
         if code == 130:  # click turns Ctrl-C into exit code 130
-            print("isoconvert: interrupted; no partial output was left", file=sys.stderr)
+            return _interrupted()
         return code
     except SystemExit as exc:
         code = exc.code
         code = code if isinstance(code, int) else (0 if code is None else 1)
-        if code == 130:  # click turns Ctrl-C into exit code 130
-            print("isoconvert: interrupted; no partial output was left", file=sys.stderr)
+        if code == 130:  # click turns Ctrl-C into exit code 130, and batch Ctrl-C, SIGTERM too
+            return _interrupted()
         return code
     except IsoconvertError as exc:
         if debug:
             raise
         print(f"isoconvert: error: {one_line(exc, limit=2000)}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # Ctrl-C, and SIGTERM or SIGHUP (signals.Interrupted)
         if debug:
             raise
-        print("isoconvert: interrupted; no partial output was left", file=sys.stderr)
-        return 130
+        return _interrupted()
     except MemoryError:
         if debug:
             raise
@@ -1558,9 +1643,8 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
             )
             return 2
-        if type(exc).__name__ == "Abort":  # click's Ctrl-C at a prompt
-            print("isoconvert: interrupted; no partial output was left", file=sys.stderr)
-            return 130
+        if type(exc).__name__ == "Abort":  # click's Ctrl-C (or SIGTERM, SIGHUP)
+            return _interrupted()
         # a bug, not a user mistake: say so in one line
         if debug:
             raise

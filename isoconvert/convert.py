@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
@@ -9,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import check_output
+from .atomic import check_output, output_stream, refuse_inputs
 from .attributes import check_3d, vertex_normals, vertex_values
 from .errors import IsoconvertError, OutputError
 from .extract import default_method, extract
@@ -195,7 +196,8 @@ def convert(
     on_status : callable or None
         Receives one-line notices (compiling, levels equal to samples, precision).
     on_progress : callable or None
-        Called with the stage starting: "reading", "extracting", "writing".
+        Called with the stage starting: "reading", "extracting", then those that
+        run ("post-processing", "normals", "values"), "writing".
     **changes
         Fields of :class:`ConvertOptions`, :class:`ReadOptions` or
         :class:`~isoconvert.post.pipeline.PostOptions` to change, e.g.
@@ -239,10 +241,15 @@ def convert_levels(
     *,
     on_status: Callable[[str], None] | None = None,
     on_progress: Callable[[str], None] | None = None,
+    also_writes: Sequence[str | Path] = (),
     **changes,
 ) -> list[ConvertResult]:
     """:func:`convert` at several levels, reading the volume once: one mesh per
     level, named by :func:`level_outputs`.
+
+    ``also_writes`` names the other files the caller will write from the
+    results (reports, pictures): like the meshes, each is refused before any
+    work when it is one of the files being read.
 
     A volume read from its file that fits the memory budget (``--max-memory``)
     is read into memory once for all levels; a larger one is read slab by slab
@@ -258,20 +265,31 @@ def convert_levels(
     by_suffix = WRITERS.by_suffix(Path(output).suffix)
     if on_status and by_suffix and by_suffix[0] != writer.name:
         on_status(f"note: writing {writer.name} into {output}, whose extension says {by_suffix[0]}")
-    if any(path.resolve() == Path(input).resolve() for path in outputs):
-        raise OutputError(f"{output}: is the input file; choose another output name")
+    for path in [*outputs, *also_writes]:  # the input file itself, before its header is read
+        refuse_inputs(path, [input] if Path(input).is_file() else [])
     progress("reading")
     volume = read_input(input, opts)
     opts.post.check_method(opts.method or default_method(volume))
     if opts.normals:
         check_3d(volume, "normals")
     value_volume = None if opts.values is None else _value_volume(opts, volume)
+    refuse_outputs_read([*outputs, *also_writes], volume, value_volume)
     if len(levels) > 1 and volume.grid is not None and volume.grid.nbytes <= opts.blocks.budget:
         volume = _in_memory(volume)
     return [
         _extract_and_write(volume, value_volume, level, path, writer, opts, on_status, progress)
         for level, path in zip(levels, outputs, strict=True)
     ]
+
+
+def refuse_outputs_read(outputs: Sequence[str | Path], *volumes: Volume | None) -> None:
+    """Raise OutputError when an output is one of the files ``volumes`` are read
+    from (a detached header's data file, a slice of a TIFF folder, ...), or a
+    file inside a store they are read from (a Zarr folder's chunks); a new
+    mesh beside the slices of a TIFF folder or in a DICOM folder is fine."""
+    files = [f for volume in volumes if volume is not None for f in volume.files]
+    for path in outputs:
+        refuse_inputs(path, files)
 
 
 def read_input(input: str | Path, opts: ConvertOptions) -> Volume:
@@ -313,7 +331,9 @@ def _extract_and_write(
     blocks = opts.blocks
     if writer.streams and blocks.spill_dir is None:
         # a block-wise mesh larger than the budget waits for the writer on disk
-        blocks = replace(blocks, spill_dir=Path(output).resolve().parent)
+        # (a stream's, standard output's, in the temporary folder)
+        folder = tempfile.gettempdir() if output_stream(output) is not None else output.parent
+        blocks = replace(blocks, spill_dir=Path(folder).resolve())
     mesh = extract(
         volume,
         level,
@@ -339,9 +359,11 @@ def _extract_and_write(
             on_status=on_status,
         )
     if opts.normals and len(mesh.cells):
+        progress("normals")
         mesh.normals = vertex_normals(mesh, volume, flip=opts.flip, nan_as=opts.nan_as)
         mesh.info["normals"] = "volume gradient"
     if value_volume is not None:
+        progress("values")
         mesh.values = vertex_values(mesh, value_volume)
         mesh.info["values"] = value_volume.source
         outside = int(np.isnan(mesh.values).sum())

@@ -591,7 +591,8 @@ def write_info_plot(
 
     require_matplotlib()
     kind = plot_format(path)
-    path = check_output(path, force, "info.png")  # fail before reading anything
+    # fail before reading anything, and never over a file the volume is read from
+    path = check_output(path, force, "info.png", inputs=volume.files)
     fig, result = info_figure(volume, level, hist=hist, levels=levels)
     pixels = render(fig, result)
     with atomic_output(path, force, "info.png") as fh:

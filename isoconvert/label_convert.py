@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import check_output
-from .convert import ConvertOptions, ConvertResult, read_input
+from .atomic import check_output, refuse_inputs
+from .convert import ConvertOptions, ConvertResult, read_input, refuse_outputs_read
 from .errors import IsoconvertError
 from .extract.tables import DEFAULT_AMBIGUITY
 from .grid import grid_slab_zyx
@@ -33,6 +33,7 @@ def convert_labels(
     *,
     on_status: Callable[[str], None] | None = None,
     on_progress: Callable[[str], None] | None = None,
+    also_writes: Sequence[str | Path] = (),
     **changes,
 ) -> list[ConvertResult]:
     """The surfaces of the labels of a label volume (segmentation, atlas), by
@@ -53,8 +54,8 @@ def convert_labels(
         closing and smoothing (label surfaces are closed and smoothed already)
         run on each label's surface, which then no longer shares its boundary
         exactly; not with ``single_file``.
-    on_status, on_progress, **changes
-        As :func:`convert`.
+    on_status, on_progress, also_writes, **changes
+        As :func:`convert_levels`.
     """
     from .extract.labels import label_surfaces
 
@@ -78,8 +79,12 @@ def convert_labels(
     elif opts.labels:
         for path in label_outputs(output, opts.labels):
             check_output(path, opts.force)
+    known = [output] if opts.single_file else label_outputs(output, opts.labels)
+    for path in [*known, *also_writes]:  # the input itself, before its header is read
+        refuse_inputs(path, [input] if Path(input).is_file() else [])
     progress("reading")
     volume = read_input(input, opts)
+    refuse_outputs_read([*known, *also_writes], volume)
     if not opts.labels:
         _check_label_volume(volume, opts.background)
     progress("extracting")
@@ -98,7 +103,7 @@ def convert_labels(
         return [ConvertResult(volume, mesh, path, writer.name, opts.ascii)]
     outputs = label_outputs(output, surfaces.labels)
     for path in outputs:  # every name is checked before the first file is written
-        check_output(path, opts.force)
+        check_output(path, opts.force, inputs=volume.files)
     results = []
     for label, path in zip(surfaces.labels, outputs, strict=True):
         mesh = extracted = surfaces[label]

@@ -1,0 +1,250 @@
+"""Signals that stop a run: SIGTERM and SIGHUP handled as SIGINT is.
+
+``timeout``, ``kill``, a CI cancellation and ``docker stop`` send SIGTERM; a
+closed terminal sends SIGHUP. Python's default for both is to die on the
+spot, which leaves a half-written output file behind. :func:`handled` makes
+them raise :class:`Interrupted` instead (a KeyboardInterrupt, so every
+``except KeyboardInterrupt`` and ``finally`` on the way up runs, and
+:func:`isoconvert.atomic.atomic_output` removes its temporary file); the CLI
+then says so in one line and exits with 128 + the signal number, as a shell
+reports a process killed by it.
+
+Batch worker processes are set up by :func:`worker_init`: they stop when
+their parent dies (even of SIGKILL, through Linux's ``PR_SET_PDEATHSIG``, or
+a watch on the parent elsewhere), clean up when terminated, and leave SIGINT
+to the parent, which stops them (:func:`stop_workers_on_interrupt`). Only
+those worker processes ever exit from here; the library never exits the
+caller's process.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+#: The signals handled as SIGINT is (those this platform has).
+STOP_SIGNALS = tuple(
+    getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name)
+)
+
+#: A repeated SIGTERM or SIGHUP within this many seconds of the first is
+#: ignored, so that it cannot cut short the cleanup the first one started;
+#: later ones raise again (the first may have been swallowed, e.g. raised
+#: inside a ``__del__``).
+REPEAT_GRACE = 5.0
+
+#: Seconds a stopped worker process is given to remove its partial files
+#: before it is killed.
+WORKER_GRACE = 10.0
+
+
+class Interrupted(KeyboardInterrupt):
+    """A run stopped by a signal (SIGTERM, SIGHUP; SIGINT raises a plain KeyboardInterrupt).
+
+    Attributes
+    ----------
+    signum : int
+        The signal number.
+    """
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal_name(signum))
+        self.signum = signum
+
+    @property
+    def exit_code(self) -> int:
+        """128 + the signal number, as a shell reports a process it killed."""
+        return 128 + self.signum
+
+
+def signal_name(signum: int) -> str:
+    """``SIGTERM`` for 15, and so on."""
+    try:
+        return signal.Signals(signum).name
+    except ValueError:
+        return f"signal {signum}"
+
+
+#: The first stopping signal this process received, and when.
+_received: tuple[int, float] | None = None
+#: Whether a batch worker is running a job (see :func:`run_in_worker`).
+_busy = False
+
+
+def received() -> int | None:
+    """The number of the first SIGTERM or SIGHUP :func:`handled` caught, or None."""
+    return _received[0] if _received else None
+
+
+def _stop(signum: int, frame: Any) -> None:
+    global _received
+    now = time.monotonic()
+    if _received is not None and now - _received[1] < REPEAT_GRACE:
+        return  # already stopping: let the cleanup finish
+    if _received is None:
+        _received = (signum, now)
+    raise Interrupted(signum)
+
+
+@contextlib.contextmanager
+def handled() -> Iterator[None]:
+    """While inside, SIGTERM and SIGHUP raise :class:`Interrupted` in the main
+    thread; the handlers before are put back on leaving.
+
+    A signal the process was started ignoring (``nohup`` ignores SIGHUP) stays
+    ignored. Outside the main thread this does nothing (Python runs handlers
+    only there).
+    """
+    global _received
+    _received = None
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = {}
+    for sig in STOP_SIGNALS:
+        if signal.getsignal(sig) is signal.SIG_IGN:
+            continue
+        before[sig] = signal.signal(sig, _stop)
+    try:
+        yield
+    finally:
+        for sig, handler in before.items():
+            signal.signal(sig, handler)
+
+
+# --- batch worker processes -------------------------------------------------------------------
+
+#: prctl(2) option: the signal the calling process gets when its parent dies.
+_PR_SET_PDEATHSIG = 1
+
+
+def worker_init(initializer: Callable[[], None] | None = None) -> None:
+    """Set up a worker process of a batch pool, then run ``initializer``.
+
+    - SIGTERM and SIGHUP: during a job (:func:`run_in_worker`) they raise
+      :class:`Interrupted`, so its partial files are removed, and the worker
+      then exits; between jobs it exits at once.
+    - SIGINT is ignored: a Ctrl-C reaches the whole process group, and the
+      parent stops its workers (:func:`stop_workers_on_interrupt`) once it
+      has recorded which jobs were interrupted.
+    - The worker gets SIGTERM when its parent dies, however it died: Linux's
+      ``PR_SET_PDEATHSIG``, else a thread that watches the parent's pid. An
+      orphaned worker would otherwise go on writing, and hold the caller's
+      stdout and stderr open.
+    """
+    import multiprocessing
+
+    parent = multiprocessing.parent_process()
+    parent_pid = parent.pid if parent is not None and parent.pid else os.getppid()
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, _worker_stop)
+    if hasattr(signal, "SIGINT"):
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if not _die_with_parent():
+        threading.Thread(
+            target=_watch_parent, args=(parent_pid,), name="isoconvert-parent", daemon=True
+        ).start()
+    if os.getppid() != parent_pid:  # the parent died before the above took hold
+        os._exit(128 + signal.SIGTERM)
+    if initializer is not None:
+        initializer()
+
+
+def _die_with_parent() -> bool:
+    """Ask Linux to send this process SIGTERM when its parent dies; False elsewhere."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def _watch_parent(parent_pid: int) -> None:
+    while os.getppid() == parent_pid:
+        time.sleep(0.5)
+    os.kill(os.getpid(), signal.SIGTERM)
+
+
+def _worker_stop(signum: int, frame: Any) -> None:
+    global _received
+    if _received is not None:
+        return  # already stopping
+    _received = (signum, time.monotonic())
+    if _busy:
+        raise Interrupted(signum)
+    os._exit(128 + signum)
+
+
+def run_in_worker(function: Callable[..., Any], *args: Any) -> Any:
+    """``function(*args)`` in a worker set up by :func:`worker_init`. When a
+    signal stops it, the files it was writing are removed on the way out
+    (atomic outputs), and the worker exits rather than take another job."""
+    global _busy
+    _busy = True
+    try:
+        return function(*args)
+    except Interrupted as exc:
+        os._exit(exc.exit_code)
+    finally:
+        _busy = False
+
+
+@contextlib.contextmanager
+def stop_workers_on_interrupt(pool: Any, grace: float = WORKER_GRACE) -> Iterator[None]:
+    """Around the use of a ``ProcessPoolExecutor``: on KeyboardInterrupt (and
+    :class:`Interrupted`), terminate its worker processes before the pool's own
+    exit, which would otherwise wait for their jobs to finish.
+
+    Each worker gets SIGTERM (it removes its partial files and exits, see
+    :func:`worker_init`) and ``grace`` seconds; one still alive then is killed.
+    """
+    try:
+        yield
+    except KeyboardInterrupt:
+        stop_workers(pool, grace)
+        raise
+
+
+def stop_workers(pool: Any, grace: float = WORKER_GRACE) -> None:
+    """Terminate the worker processes of the ``ProcessPoolExecutor`` ``pool``
+    (SIGTERM, then SIGKILL after ``grace`` seconds) and cancel its jobs."""
+    # the executor has no public way to reach its processes; _processes (pid ->
+    # Process) has been there since Python 3.2
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    for process in processes:
+        with contextlib.suppress(Exception):
+            process.terminate()
+    deadline = time.monotonic() + grace
+    for process in processes:
+        with contextlib.suppress(Exception):
+            process.join(max(0.0, deadline - time.monotonic()))
+    for process in processes:
+        with contextlib.suppress(Exception):
+            if process.is_alive():
+                process.kill()
+                process.join(1.0)
+    with contextlib.suppress(Exception):
+        pool.shutdown(wait=False, cancel_futures=True)
+
+
+__all__ = [
+    "STOP_SIGNALS",
+    "Interrupted",
+    "handled",
+    "received",
+    "run_in_worker",
+    "signal_name",
+    "stop_workers",
+    "stop_workers_on_interrupt",
+    "worker_init",
+]
