@@ -208,3 +208,127 @@ def test_info_plot_of_a_constant_volume_draws_it_without_contour(tmp_path, capsy
     code, _, err = run(capsys, "info", nan, "--plot", tmp_path / "n.png")
     one_line_error(code, err, "no finite samples")
     assert not (tmp_path / "n.png").exists()
+
+
+# --- post-processing that would leave nothing ------------------------------------------------
+
+TWO_SPHERES = "sample_volumes/two_spheres.nrrd"
+
+
+def two_sphere_parts():
+    """trimesh's components of two_spheres.nrrd at 0.25 (independent of isoconvert.graph)."""
+    import trimesh
+    from conftest import SAMPLES
+
+    from isoconvert import extract, read_volume
+
+    mesh = extract(read_volume(SAMPLES / "two_spheres.nrrd"), 0.25)
+    tm = trimesh.Trimesh(mesh.vertices, mesh.cells, process=False)
+    return tm.split(only_watertight=False)
+
+
+def test_min_size_that_removes_everything_is_refused(tmp_path, capsys):
+    from conftest import SAMPLES
+
+    pieces = two_sphere_parts()
+    largest = max(len(p.faces) for p in pieces)
+    out = tmp_path / "t.ply"
+    code, stdout, err = run(
+        capsys, "convert", SAMPLES / "two_spheres.nrrd", "-l", "0.25", "-o", out,
+        "--min-size", largest + 1,
+    )  # fmt: skip
+    line = one_line_error(
+        code,
+        err,
+        f"--min-size {largest + 1} removed all {len(pieces)} components "
+        f"(the largest has {largest:,} triangles); lower it",
+        "two_spheres.nrrd",
+    )
+    assert "wrote" not in stdout and list(tmp_path.iterdir()) == [], line
+    # one triangle less keeps the largest: written, as before
+    code, _, err = run(
+        capsys, "convert", SAMPLES / "two_spheres.nrrd", "-l", "0.25", "-o", out,
+        "--min-size", largest,
+    )  # fmt: skip
+    assert code == 0 and out.is_file(), err
+
+
+def test_min_volume_that_removes_everything_is_refused(tmp_path, capsys):
+    from conftest import SAMPLES
+
+    pieces = two_sphere_parts()
+    assert all(p.is_watertight for p in pieces)
+    biggest = max(abs(p.volume) for p in pieces)
+    out = tmp_path / "t.ply"
+    code, _, err = run(
+        capsys, "convert", SAMPLES / "two_spheres.nrrd", "-l", "0.25", "-o", out,
+        "--min-volume", 1e9,
+    )  # fmt: skip
+    line = one_line_error(code, err, f"--min-volume 1e+09 removed all {len(pieces)} components")
+    said = float(re.search(r"the largest encloses ([0-9.e+-]+)", line).group(1))
+    assert said == pytest.approx(biggest, rel=1e-5) and "lower it" in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cavities_filled_then_min_size_removing_the_rest_is_refused(tmp_path, capsys):
+    from conftest import ball
+
+    from isoconvert import Volume, extract
+    from isoconvert.post.components import fill_cavities
+
+    field = np.minimum(ball(24, 9.2), -ball(24, 4.3)).astype(np.float32)  # a hollow ball
+    path = save(tmp_path, "hollow.npy", field)
+    outer = fill_cavities(extract(Volume(field), 0.0))
+    n = outer.n_cells  # the outer surface, which --fill-cavities keeps
+    code, _, err = run(
+        capsys, "convert", path, "-l", "0", "-o", tmp_path / "h.ply",
+        "--fill-cavities", "--min-size", n + 1,
+    )  # fmt: skip
+    one_line_error(
+        code, err, f"--min-size {n + 1} removed the only component (it has {n:,} triangles)"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hollow.npy"]
+
+
+def test_batch_counts_a_file_emptied_by_min_size_as_failed(tmp_path, capsys):
+    import shutil
+
+    from conftest import SAMPLES, ball
+
+    from isoconvert import Volume, extract
+
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(SAMPLES / "two_spheres.nrrd", src)
+    big = ball(24, 9.0).astype(np.float32)  # one ball, larger than either of two_spheres
+    save(src, "big.npy", big)
+    largest = max(len(p.faces) for p in two_sphere_parts())
+    assert extract(Volume(big), 0.25).n_cells > largest + 1
+    code, out, err = run(
+        capsys, "batch", src, "-o", tmp_path / "out", "-l", "0.25", "--min-size", largest + 1,
+        "-j", "1",
+    )  # fmt: skip
+    assert code == 1
+    assert f"--min-size {largest + 1} removed all 2 components" in err
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["big.ply"]
+
+
+def test_any_step_that_empties_the_mesh_is_refused(monkeypatch):
+    """Decimation cannot remove every triangle today; should a step ever do so,
+    post_process refuses (rather than hand an empty mesh to the writer)."""
+    from conftest import ball
+
+    from isoconvert import Volume, extract
+    from isoconvert.mesh import Mesh
+    from isoconvert.post import decimate as decimation
+    from isoconvert.post.pipeline import EmptyMeshError, PostOptions, post_process
+
+    volume = Volume(ball(12, 4.0), source="b.npy")
+    mesh = extract(volume, 0.0)
+
+    def nothing(mesh, *args, **kwargs):
+        return Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, dict(mesh.info))
+
+    monkeypatch.setattr(decimation, "decimate", nothing)
+    with pytest.raises(EmptyMeshError, match=r"^b\.npy: decimation removed every triangle;"):
+        post_process(mesh, volume, PostOptions(decimate=0.5), ambiguity="", flip=False, nan_as=None)

@@ -116,24 +116,33 @@ def drop_small(
     -------
     Mesh
         ``info["cleanup"]`` gains ``{"step": "drop_small", "min_triangles",
-        "min_volume", "components_before", "components_after"}``.
+        "min_volume", "components_before", "components_after", "largest_triangles",
+        "largest_volume"}``: the last two are the most triangles of a component,
+        and the largest volume a closed component encloses (None without
+        ``min_volume`` or without closed components), before the step, so a
+        caller can say how far a minimum was from keeping something.
     """
     if min_triangles is None and min_volume is None:
         raise IsoconvertError("drop_small needs min_triangles or min_volume")
     tri_comp, sizes, _ = _labels(mesh)
     keep = np.ones(len(sizes), dtype=bool)
+    largest_volume = None
     if min_triangles is not None:
         keep &= sizes >= int(min_triangles)
     if min_volume is not None:
         closed = _closed(mesh, tri_comp, len(sizes))
         volume = np.abs(_volumes(mesh, tri_comp, len(sizes)))
         keep &= ~closed | (volume >= float(min_volume))
+        if closed.any():
+            largest_volume = float(volume[closed].max())
     record = {
         "step": "drop_small",
         "min_triangles": None if min_triangles is None else int(min_triangles),
         "min_volume": None if min_volume is None else float(min_volume),
         "components_before": int(len(sizes)),
         "components_after": int(keep.sum()),
+        "largest_triangles": int(sizes.max()) if len(sizes) else 0,
+        "largest_volume": largest_volume,
     }
     return _subset(mesh, keep[tri_comp], record)
 

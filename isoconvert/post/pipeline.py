@@ -17,6 +17,10 @@ from ..volume import Volume
 from .smooth import METHODS, SmoothOptions
 
 
+class EmptyMeshError(IsoconvertError):
+    """A post-processing step removed every triangle: there is nothing to write."""
+
+
 @dataclass(frozen=True)
 class PostOptions:
     """What happens to a surface after extraction (all off by default).
@@ -142,6 +146,13 @@ def post_process(
     Returns
     -------
     Mesh
+        With at least one triangle when ``mesh`` has one.
+
+    Raises
+    ------
+    EmptyMeshError
+        A step removed every triangle (a minimum above every component, say):
+        an empty file helps nobody, so the message says by how much to lower it.
     """
     if options.close:
         from .cap import close_at_grid
@@ -159,11 +170,24 @@ def post_process(
         from .components import drop_small, fill_cavities, keep_largest
 
         if options.fill_cavities:
-            mesh = fill_cavities(mesh)
+            mesh = _not_emptied(fill_cavities(mesh), mesh, "--fill-cavities", volume)
         if small:
-            mesh = drop_small(mesh, min_triangles=options.min_size, min_volume=options.min_volume)
+            flags = " and ".join(
+                f"--{name} {value:g}"
+                for name, value in (
+                    ("min-size", options.min_size),
+                    ("min-volume", options.min_volume),
+                )
+                if value is not None
+            )
+            mesh = _not_emptied(
+                drop_small(mesh, min_triangles=options.min_size, min_volume=options.min_volume),
+                mesh,
+                flags,
+                volume,
+            )
         if options.keep is not None:
-            mesh = keep_largest(mesh, options.keep)
+            mesh = _not_emptied(keep_largest(mesh, options.keep), mesh, "--keep", volume)
     if options.smooth:
         from .smooth import smooth
 
@@ -181,7 +205,9 @@ def post_process(
         from .decimate import decimate
 
         before = mesh.n_cells
-        mesh = decimate(mesh, options.decimate, options.max_error)
+        mesh = _not_emptied(
+            decimate(mesh, options.decimate, options.max_error), mesh, "decimation", volume
+        )
         removed = 1.0 - mesh.n_cells / before if before else 0.0
         asked = options.decimate
         if on_status and (asked is None and removed == 0 or asked and removed < asked - 0.01):
@@ -195,6 +221,41 @@ def post_process(
                 f"{why}"
             )
     return mesh
+
+
+def _not_emptied(after: Mesh, before: Mesh, flags: str, volume: Volume) -> Mesh:
+    """``after``, unless the step (``flags``, as typed) removed every triangle of ``before``.
+
+    Raises
+    ------
+    EmptyMeshError
+        ``after`` has no triangle and ``before`` had some; the message counts the
+        components and, for a minimum, gives the largest component's size.
+    """
+    if after.n_cells or not before.n_cells:
+        return after
+    record = (after.info.get("cleanup") or [{}])[-1]
+    n = int(record.get("components_before", 0))
+    what = "the only component" if n == 1 else f"all {n:,} components"
+    if flags == "decimation":  # it records no components
+        what = "every triangle"
+    largest = []
+    if record.get("step") == "drop_small":
+        count = int(record["largest_triangles"])
+        if record.get("min_triangles") is not None:
+            largest.append(
+                f"it has {count:,} triangles" if n == 1 else f"the largest has {count:,} triangles"
+            )
+        enclosed = record.get("largest_volume")
+        if record.get("min_volume") is not None and enclosed is not None:
+            unit = f" {volume.unit}³" if volume.unit else ""
+            closed = "it encloses" if n == 1 else "the largest encloses"
+            largest.append(f"{closed} {enclosed:.6g}{unit}")
+        fix = "lower them" if " and " in flags else "lower it"
+    else:
+        fix = "leave it out"
+    detail = f" ({'; '.join(largest)})" if largest else ""
+    raise EmptyMeshError(f"{volume.source}: {flags} removed {what}{detail}; {fix}")
 
 
 #: What :func:`changes` compares: (label, where in the report's dict).
@@ -246,4 +307,4 @@ def changes(before: dict, after: dict) -> list[str]:
     return lines
 
 
-__all__ = ["PostOptions", "changes", "post_process"]
+__all__ = ["EmptyMeshError", "PostOptions", "changes", "post_process"]
