@@ -566,3 +566,67 @@ def test_placement_notes_pickle_as_they_are():
     assert again == note and again.about == {"spacing", "origin"}
     assert without_overridden([note, "other"], {"spacing"}) == [note, "other"]
     assert without_overridden([note, "other"], {"spacing", "origin"}) == ["other"]
+
+
+# --- 5. ASCII NRRD numbers must fit the sample type -----------------------------------------
+
+
+def _ascii_nrrd(path: Path, kind: str, text: str, sizes="3 2") -> Path:
+    path.write_text(
+        f"NRRD0004\ntype: {kind}\ndimension: 2\nsizes: {sizes}\nencoding: ascii\n\n{text}\n"
+    )
+    return path
+
+
+@pytest.mark.parametrize(
+    "kind, text, index, shown, why",
+    [
+        ("uint8", "1 2 3\n4 300 6", 4, "300", "outside the range 0..255 of type uint8"),
+        ("uchar", "1 2 -1 4 5 6", 2, "-1", "outside the range 0..255 of type uchar"),
+        ("short", "1 2 3 4 5 40000", 5, "40000", "outside the range -32768..32767 of type short"),
+        ("int", "1 2 3 4 2147483648 6", 4, "2147483648", "outside the range -2147483648.."),
+        ("int8", "1 99999999999999999999 3 4 5 6", 1, "99999999999999999999", "outside the"),
+        ("uint8", "1 2 3.5 4 5 6", 2, "3.5", "not a whole number, as type uint8 needs"),
+        ("int16", "1 2 3 4 x 6", 4, "x", "not a whole number, as type int16 needs"),
+        ("float", "1 2 3 4 5 1e39", 5, "1e39", "beyond the range of type float"),
+        ("double", "1 1e999 3 4 5 6", 1, "1e999", "beyond the range of type double"),
+        ("float", "1 2 abc 4 5 6", 2, "abc", "not a number, as type float needs"),
+    ],
+)
+def test_ascii_nrrd_value_the_type_cannot_hold_is_refused(tmp_path, kind, text, index, shown, why):
+    path = _ascii_nrrd(tmp_path / "v.nrrd", kind, text)
+    with pytest.raises(FormatError) as err:
+        read_volume(path)
+    message = str(err.value)
+    assert message.startswith(
+        f"{path}: the NRRD data cannot be read: the ascii data in the file holds {shown} at "
+        f"sample index {index} (0-based, in file order), {why}"
+    ), message
+    assert "\n" not in message
+
+
+def test_ascii_nrrd_values_at_the_ends_of_the_range_read_exactly(tmp_path):
+    cases = {
+        "uint8": ("0 255 1 2 3 4", np.uint8),
+        "int8": ("-128 127 0 1 2 3", np.int8),
+        "uint16": ("0 65535 1 2 3 4", np.uint16),
+        "int32": ("-2147483648 2147483647 0 1 2 3", np.int32),
+        "uint32": ("0 4294967295 1 2 3 4", np.uint32),
+        "float": ("-3.4e38 3.4e38 inf -inf 0.5 1e-3", np.float32),
+        "double": ("1e308 -1e308 nan 1 2 3", np.float64),
+    }
+    for kind, (text, dtype) in cases.items():
+        vol = read_volume(_ascii_nrrd(tmp_path / f"{kind}.nrrd", kind, text))
+        expected = np.array(text.split(), dtype=np.float64).astype(dtype).reshape(2, 3)
+        assert vol.data.dtype == dtype
+        assert np.array_equal(vol.data, expected.T, equal_nan=True), kind
+    # commas and any whitespace separate numbers
+    vol = read_volume(_ascii_nrrd(tmp_path / "commas.nrrd", "short", "1, 2,3\n\t4 5\r\n6"))
+    assert vol.data.T.ravel().tolist() == [1, 2, 3, 4, 5, 6]
+
+
+def test_ascii_nrrd_count_must_match(tmp_path):
+    with pytest.raises(FormatError, match="holds 5 numbers, but sizes 3 2 of uint8 need 6"):
+        read_volume(_ascii_nrrd(tmp_path / "v.nrrd", "uint8", "1 2 3 4 5"))
+    with pytest.raises(FormatError, match="holds 7 numbers, but sizes 3 2 of uint8 need 6"):
+        read_volume(_ascii_nrrd(tmp_path / "w.nrrd", "uint8", "1 2 3 4 5 6 7"))

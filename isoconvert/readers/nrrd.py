@@ -1,9 +1,10 @@
 """NRRD volumes: attached .nrrd, detached .nhdr, multi-file data.
 
-pynrrd parses the header fields and reads the ascii encoding, where the file's
-size bounds the work. The binary encodings (raw, gzip, bzip2) and hex are read
-here, so that compressed data is never decompressed past the size the header
-declares (a gzip bomb stops after a few MiB) and raw data is memory-mapped.
+pynrrd parses the header fields; the samples are read here. ascii (where the
+file's size bounds the work) has every number checked to fit the sample type,
+never wrapped. The binary encodings (raw, gzip, bzip2) and hex are read so that
+compressed data is never decompressed past the size the header declares (a gzip
+bomb stops after a few MiB) and raw data is memory-mapped.
 A 3D volume whose raw or compressed samples are in one file is read lazily,
 slab by slab (:class:`~isoconvert.grid.RawGrid`, :class:`CompressedNrrdGrid`),
 so that it need not fit in memory; multi-file, hex and ascii data are read whole.
@@ -786,24 +787,72 @@ def _read_hex_part(path, source, out, line_skip, byte_skip, described) -> None:
 
 
 def _read_ascii_part(path, source, out, line_skip, byte_skip, described, header) -> None:
-    """ascii encoding, through pynrrd (the text's size bounds the work)."""
-    import nrrd
+    """ascii encoding: numbers separated by whitespace (or commas), in file order.
 
-    part = {
-        "dimension": 1,
-        "sizes": np.array([out.size]),
-        "type": header["type"],
-        "encoding": "ascii",
-        "byte skip": byte_skip,
-    }
-    try:
-        with _open_at_data(source, line_skip) as fh:
-            values = nrrd.read_data(part, fh, str(path), index_order="C")
-    except (nrrd.NRRDError, ValueError) as exc:
+    Every number must be one the sample type holds: a value outside an integer
+    type's range, text that is not a whole number for an integer type, or a
+    finite number beyond a float type's range is refused, naming the first such
+    value and its sample index (numpy's parsers would wrap 300 to 44 in uint8).
+    The text's size bounds the work.
+    """
+    with _open_at_data(source, line_skip) as fh:
+        fh.seek(byte_skip, os.SEEK_CUR)
+        text = fh.read()
+    tokens = text.replace(b",", b" ").split()
+    if len(tokens) != out.size:
         raise FormatError(
             f"{path}: the NRRD data cannot be read: the ascii data in {_where(path, source)} "
-            f"does not hold {out.size} numbers ({described}) ({one_line(exc)})"
-        ) from None
+            f"holds {len(tokens)} numbers, but {described} need {out.size}"
+        )
+    kind = str(header["type"]).strip()
+
+    def refuse(index: int, why: str) -> FormatError:
+        shown = one_line(tokens[index].decode("ascii", "replace"), 40)
+        return FormatError(
+            f"{path}: the NRRD data cannot be read: the ascii data in {_where(path, source)} "
+            f"holds {shown} at sample index {index} (0-based, in file order), {why}; fix the "
+            "value, or declare a type that holds it"
+        )
+
+    if out.dtype.kind in "iu":
+        info = np.iinfo(out.dtype)
+        span = f"outside the range {info.min}..{info.max} of type {kind}"
+        try:
+            values = np.array(tokens).astype(np.int64)
+        except (ValueError, OverflowError):
+            # not whole numbers, or beyond int64: find the first bad one the slow way
+            numbers = []
+            for i, token in enumerate(tokens):
+                try:
+                    number = int(token)
+                except ValueError:
+                    raise refuse(i, f"not a whole number, as type {kind} needs") from None
+                if not info.min <= number <= info.max:
+                    raise refuse(i, span) from None
+                numbers.append(number)
+            out[:] = np.array(numbers, dtype=object).astype(out.dtype)
+            return
+        outside = (values < info.min) | (values > info.max)
+        if outside.any():
+            raise refuse(int(np.argmax(outside)), span)
+        out[:] = values
+        return
+    try:
+        values = np.array(tokens).astype(np.float64)
+    except ValueError:
+        for i, token in enumerate(tokens):
+            try:
+                float(token)
+            except ValueError:
+                raise refuse(i, f"not a number, as type {kind} needs") from None
+        raise
+    # a finite number past the type's range would become infinite; "inf" spelt out is fine
+    limit = np.finfo(out.dtype).max
+    with np.errstate(invalid="ignore"):
+        beyond = np.abs(values) > limit
+    spelt = np.array([b"inf" in t.lower() for t in tokens]) if beyond.any() else None
+    if spelt is not None and (beyond & ~spelt).any():
+        raise refuse(int(np.argmax(beyond & ~spelt)), f"beyond the range of type {kind}")
     out[:] = values
 
 
