@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FormatError
-from ..writers.header import parse_grid_comment, unescape_comment
+from ..writers.header import GRID_PREFIX, parse_grid_comment, unescape_comment
 
 #: A PLY header longer than this is not one (a binary file without end_header).
 _MAX_HEADER_BYTES = 1 << 24
@@ -58,10 +58,19 @@ def _first_grid(comments: list[str]) -> dict | None:
     return None
 
 
+#: Comment texts by which isoconvert's writers sign a file (every mesh isoconvert
+#: writes was extracted from a volume, so its open boundaries are where a grid cut it).
+_OUR_COMMENTS = ("made by isoconvert", GRID_PREFIX.strip())
+
+
 def _recorded(comments: list[str]) -> dict:
     """What isoconvert's header comments record for the report: ``grid`` (the grid
-    record) and ``unit`` (the volume's length unit, from a ``unit U`` line)."""
+    record), ``unit`` (the volume's length unit, from a ``unit U`` line) and
+    ``cut_by_grid`` (True when isoconvert wrote the file, see
+    :func:`isoconvert.check_mesh`)."""
     out: dict = {}
+    if any(t.startswith(_OUR_COMMENTS) for t in comments):
+        out["cut_by_grid"] = True
     grid = _first_grid(comments)
     if grid is not None:
         out["grid"] = grid

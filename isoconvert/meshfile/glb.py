@@ -47,6 +47,10 @@ def _read_glb(path: Path) -> Mesh:
         raise _Unreadable(f"its JSON chunk is not JSON ({exc})") from None
     if not isinstance(gltf, dict):
         raise _Unreadable("its JSON chunk is not a glTF object")
+    required = gltf.get("extensionsRequired") or []
+    if required:  # Draco or meshopt compressed data: not read (nor inflated)
+        names = ", ".join(one_line(name, 60) for name in required)
+        raise _Unreadable(f"it requires glTF extensions check does not read ({names})")
     binary = next((chunk for kind, chunk in chunks[1:] if kind == 0x004E4942), None)
     buffers = [_gltf_buffer(b, binary) for b in gltf.get("buffers", [])]
     extras = gltf.get("asset", {}).get("extras", {})
@@ -70,7 +74,9 @@ def _read_glb(path: Path) -> Mesh:
                 )
             if "POSITION" not in primitive.get("attributes", {}):
                 raise _Unreadable("a primitive has no POSITION attribute")
-            positions = _gltf_accessor(gltf, buffers, primitive["attributes"]["POSITION"])
+            positions = _gltf_accessor(
+                gltf, buffers, primitive["attributes"]["POSITION"], len(data)
+            )
             if positions.ndim != 2 or positions.shape[1] != 3:
                 raise _Unreadable("its POSITION accessor is not VEC3")
             with np.errstate(invalid="ignore", over="ignore"):  # the report names non-finite ones
@@ -80,7 +86,9 @@ def _read_glb(path: Path) -> Mesh:
                 transformed = True
             size = 3 if mode == _GLTF_TRIANGLES else 2
             if "indices" in primitive:
-                indices = _gltf_accessor(gltf, buffers, primitive["indices"]).astype(np.int64)
+                indices = _gltf_accessor(gltf, buffers, primitive["indices"], len(data)).astype(
+                    np.int64
+                )
             else:
                 indices = np.arange(len(positions), dtype=np.int64)
             if indices.size % size:
@@ -103,6 +111,7 @@ def _read_glb(path: Path) -> Mesh:
     if isinstance(ours, dict):
         from ..geometry import normalized_grid
 
+        info["cut_by_grid"] = True  # isoconvert's file: extracted from a volume
         grid = normalized_grid(ours.get("grid"))
         if grid is not None:
             info["grid"] = grid
@@ -138,8 +147,12 @@ def _gltf_buffer(buffer: dict, binary: bytes | None) -> bytes:
     return data
 
 
-def _gltf_accessor(gltf: dict, buffers: list[bytes], index: int) -> np.ndarray:
-    """The values of accessor ``index``: (count,) for SCALAR, (count, k) for VECk."""
+def _gltf_accessor(gltf: dict, buffers: list[bytes], index: int, most: int) -> np.ndarray:
+    """The values of accessor ``index``: (count,) for SCALAR, (count, k) for VECk.
+
+    An accessor with no buffer view is all zeros, values the file's bytes do
+    not back: it may have at most ``most`` values (the file's size), so that a
+    count of 10**12 in a small file is refused, not allocated."""
     accessor = gltf["accessors"][index]
     if "sparse" in accessor:
         raise _Unreadable("a sparse accessor, which check does not read")
@@ -148,8 +161,15 @@ def _gltf_accessor(gltf: dict, buffers: list[bytes], index: int) -> np.ndarray:
     if code is None or width is None:
         raise _Unreadable(f"accessor {index} has an unsupported component type or type")
     count = int(accessor["count"])
+    if count < 0:
+        raise _Unreadable(f"accessor {index} has a negative count ({count})")
     dtype = np.dtype("<" + code)
     if "bufferView" not in accessor:  # glTF: all zeros
+        if count * width > most:
+            raise _Unreadable(
+                f"accessor {index} declares {count:,} elements of zeros (no bufferView), "
+                f"more values than the file has bytes ({most:,}); the file is corrupt"
+            )
         values = np.zeros((count, width), dtype)
         return values[:, 0] if width == 1 else values
     view = gltf["bufferViews"][accessor["bufferView"]]

@@ -37,6 +37,8 @@ def _read_off(path: Path) -> Mesh:
     if len(words) < 2:
         raise _Unreadable("no vertex and face counts")
     n_vertices, n_faces = int(words[0]), int(words[1])
+    if n_vertices < 0 or n_faces < 0:
+        raise _Unreadable(f"negative vertex or face count ({n_vertices} {n_faces})")
     rows = lines[counts + 1 : counts + 1 + n_vertices + n_faces]
     if len(rows) < n_vertices + n_faces:
         raise _Unreadable(f"the file ends before its {n_vertices} vertices and {n_faces} faces")

@@ -96,6 +96,8 @@ def _ply_header(path: Path, fh) -> _PlyHeader:
                 count = int(words[2])
             except ValueError:
                 raise _Unreadable(f"PLY header line {line!r} has no count") from None
+            if count < 0:
+                raise _Unreadable(f"PLY header line {line!r} has a negative count")
             elements.append(_Element(words[1], count))
         elif keyword == "property" and elements:
             if len(words) == 5 and words[1] == "list":
@@ -218,6 +220,14 @@ def _binary_lists(
     truncated = _Unreadable(f"the file ends inside its {element.name} element")
     if element.count == 0:
         return {p.name: np.zeros((0, 3), np.int64) for p in element.properties}, offset
+    # each record has at least its fixed properties and its lists' counts: a count
+    # the rest of the file cannot hold is refused before any record is read
+    least = sum(np.dtype(p.count_dtype or p.dtype).itemsize for p in element.properties)
+    if offset + least * element.count > len(body):
+        raise _Unreadable(
+            f"its {element.name} element declares {element.count:,} records of at least "
+            f"{least} bytes, but the file has {len(body) - offset:,} bytes left"
+        )
     # the sizes of the first record's lists give a candidate fixed layout
     fields, cursor = [], offset
     for p in element.properties:

@@ -13,6 +13,44 @@ from ..writers.header import parse_grid_comment
 from .common import _as_stored, _check_indices, _tag, _Unreadable
 
 _3MF_MODEL = "3D/3dmodel.model"
+#: A part may inflate to at most this many times its compressed size (a 3MF
+#: model's XML compresses 3 to 10 times; zeros or spaces 1000 times, as in a
+#: decompression bomb) ...
+_MAX_RATIO = 100
+#: ... unless it is this small (a tiny part may compress far better).
+_SMALL_PART = 16 << 20
+#: Bytes inflated at a time.
+_CHUNK = 1 << 20
+
+
+def _read_part(path: Path, package, name: str) -> bytes:
+    """The bytes of one part of the package, inflated in bounded chunks.
+
+    A part whose ZIP entry declares more than :data:`_MAX_RATIO` times its
+    compressed size (and more than :data:`_SMALL_PART` bytes) is refused before
+    it is inflated, and no part is inflated past the size its entry declares:
+    a decompression bomb is a one-line FormatError, not gigabytes of memory.
+
+    Returns
+    -------
+    bytes
+        At most the entry's declared size.
+    """
+    entry = package.getinfo(name)
+    declared, packed = entry.file_size, entry.compress_size
+    if declared > max(_SMALL_PART, _MAX_RATIO * packed):
+        raise FormatError(
+            f"{path}: its part {name} declares {declared:,} bytes from {packed:,}, "
+            f"more than {_MAX_RATIO} times its compressed size; the file is corrupt or "
+            "a decompression bomb"
+        )
+    chunks = []
+    # zipfile stops inflating at the size the entry declares (and then finds the
+    # CRC wrong when the data goes on: BadZipFile, which the caller words)
+    with package.open(entry) as fh:
+        while chunk := fh.read(_CHUNK):
+            chunks.append(chunk)
+    return b"".join(chunks)
 
 
 def _read_3mf(path: Path) -> Mesh:
@@ -25,9 +63,9 @@ def _read_3mf(path: Path) -> Mesh:
     try:
         with zipfile.ZipFile(path) as package:
             names = set(package.namelist())
-            part = _3mf_start_part(package, names)
-            xml = package.read(part)
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError) as exc:
+            part = _3mf_start_part(path, package, names)
+            xml = _read_part(path, package, part)
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, NotImplementedError) as exc:
         raise _Unreadable(f"not a readable ZIP package ({exc})") from None
     except zlib.error as exc:
         raise _Unreadable(f"a part does not decompress ({exc})") from None
@@ -89,6 +127,8 @@ def _read_3mf(path: Path) -> Mesh:
         grid = parse_grid_comment(text)
         if meta.get("name", "").endswith("grid") and grid is not None:
             info["grid"] = grid
+        if meta.get("name", "").startswith("isoconvert:"):
+            info["cut_by_grid"] = True  # isoconvert's file: extracted from a volume
         if meta.get("name", "") == "isoconvert:coordinates" and "not converted" in text:
             unit_known = False  # isoconvert wrote "millimeter" for want of a unit
     # 3MF's unit (millimeter when the model names none), by its usual symbol
@@ -116,13 +156,13 @@ def _float32_text(values: np.ndarray) -> bool:
     return True
 
 
-def _3mf_start_part(package, names: set[str]) -> str:
+def _3mf_start_part(path: Path, package, names: set[str]) -> str:
     """The model part the package's relationships name (else ``3D/3dmodel.model``)."""
     from xml.etree import ElementTree
 
     if "_rels/.rels" in names:
         try:
-            rels = ElementTree.fromstring(package.read("_rels/.rels"))
+            rels = ElementTree.fromstring(_read_part(path, package, "_rels/.rels"))
         except ElementTree.ParseError:
             rels = None
         for rel in rels if rels is not None else []:

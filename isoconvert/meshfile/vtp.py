@@ -36,6 +36,9 @@ _VTK_TYPES = {
     "String": "u1",
 }
 _XML_COMMENT = re.compile(rb"<!--(.*?)-->", re.DOTALL)
+#: The most bytes deflate inflates one compressed byte to (a run of one value
+#: costs at least 2 bits per 258 bytes): a header declaring more is corrupt.
+_DEFLATE_RATIO = 1032
 
 
 @dataclass
@@ -47,6 +50,7 @@ class _VtkData:
     compressor: str | None  # "zlib", "lzma" or None
     appended: bytes | memoryview  # bytes after the "_" of <AppendedData>, or b""
     appended_base64: bool
+    path: Path | None = None  # the file, for the messages of a block that inflates too far
 
 
 def _read_vtp(path: Path) -> Mesh:
@@ -91,7 +95,7 @@ def _read_vtp(path: Path) -> Mesh:
     if header is None:
         raise _Unreadable(f"unknown header_type {root.get('header_type')!r}")
     order = ">" if root.get("byte_order") == "BigEndian" else "<"
-    vtk = _VtkData(order, header, known[compressor], appended, base64_data)
+    vtk = _VtkData(order, header, known[compressor], appended, base64_data, path)
     polydata = next((e for e in root if _tag(e) == "PolyData"), None)
     if polydata is None:
         raise _Unreadable("no PolyData element")
@@ -288,19 +292,42 @@ def _vtk_inflate(
 ) -> np.ndarray:
     """Decompress the blocks of a compressed array. ``sizes`` is the header:
     number of blocks, block size, size of the last block (0: a full one), the
-    compressed size of each block."""
+    compressed size of each block.
+
+    No block is inflated past the size the header declares for it (plus one
+    byte, to tell that it goes on): a block that would is a FormatError naming
+    the file, and a decompression bomb costs a few bytes more than the header
+    declares, never what the data would inflate to. Nor is the header believed
+    when it declares more than zlib can inflate from the block's bytes (deflate
+    turns a byte into at most 1032): such a file is corrupt.
+    """
     import lzma
     import zlib
 
     blocks, block_size, last = int(sizes[0]), int(sizes[1]), int(sizes[2])
-    decompress = zlib.decompress if vtk.compressor == "zlib" else lzma.decompress
+    kind = vtk.compressor
+    where = f"{vtk.path}: " if vtk.path is not None else ""
+    if block_size < 0 or last < 0 or last > block_size:
+        raise _Unreadable(f"the compression header of its {name} array is corrupt")
     parts = []
     for number, size in enumerate(sizes[3:].tolist()):
+        expected = last if number == blocks - 1 and last else block_size
+        if kind == "zlib" and expected > _DEFLATE_RATIO * size + 64:
+            raise FormatError(
+                f"{where}a zlib block of its {name} array declares {expected:,} bytes from "
+                f"{size:,}, more than zlib can inflate them to; the file is corrupt"
+            )
+        inflater = zlib.decompressobj() if kind == "zlib" else lzma.LZMADecompressor()
         try:
-            part = decompress(bytes(source[start : start + size]))
+            # max_length: one byte past the declared size tells that the block goes on
+            part = inflater.decompress(bytes(source[start : start + size]), expected + 1)
         except (zlib.error, lzma.LZMAError) as exc:
             raise _Unreadable(f"its {name} array does not decompress ({exc})") from None
-        expected = last if number == blocks - 1 and last else block_size
+        if len(part) > expected:
+            raise FormatError(
+                f"{where}a {kind} block of its {name} array inflates past the {expected:,} "
+                "bytes its header declares; the file is corrupt or a decompression bomb"
+            )
         if len(part) != expected:
             raise _Unreadable(f"a block of its {name} array has the wrong size")
         parts.append(part)
