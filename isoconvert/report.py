@@ -36,10 +36,14 @@ The frame of boundaries
 Open boundaries (edges in one triangle, ends of open polylines) are holes
 unless they lie on a face of the domain: the grid the mesh was extracted from
 when it is known (``mesh.info["grid"]``, or the ``grid`` argument of
-:func:`check_mesh`, see :func:`grid_from_volume`), else the mesh's bounding box,
-which the report then says in ``notes``. Points count as on a grid face within
-1e-6 index units plus the rounding error of the stored coordinates, which is
-that of float32 when ``mesh.info["stored_precision"]`` is ``"float32"`` (or,
+:func:`check_mesh`, see :func:`grid_from_volume`). Without a grid, the mesh's
+bounding box stands in for it only when the mesh records that a grid cut it
+(``mesh.info["cut_by_grid"]``: files written by isoconvert, which are all
+extracted from a volume, say so), and the report then says so in ``notes``;
+any other mesh has no domain (``boundary_frame`` "none"): an open box is not
+excused by its own bounding box, every boundary edge is a hole. Points count
+as on a grid face within 1e-6 index units plus the rounding error of the stored
+coordinates, which is that of float32 when ``mesh.info["stored_precision"]`` is ``"float32"`` (or,
 when the precision is not stated, when every coordinate is a float32 value):
 ``4 * 2**-24 * (|p| @ |A^-1|.T)`` index units per axis for a point ``p`` and
 the grid's index-to-world matrix ``A``.
@@ -107,8 +111,9 @@ class Report:
     measures : dict
         Area and enclosed volume (triangles), or total length (segments).
     boundary_frame : str
-        "grid" when boundaries were judged against the volume's grid, else
-        "bounding box".
+        "grid" when boundaries were judged against the volume's grid,
+        "bounding box" when the mesh records that a grid cut it but not which,
+        else "none" (every open boundary is a hole).
     """
 
     kind: str
@@ -166,6 +171,11 @@ _GRID_TOLERANCE = 1e-6
 BOUNDING_BOX_NOTE = (
     "boundaries judged against the bounding box: no grid is recorded with the mesh; "
     "pass --grid VOLUME to judge them against the volume's grid"
+)
+#: ``Report.notes`` entry when open boundaries had no domain to be judged against.
+NO_FRAME_NOTE = (
+    "every open boundary counts as a hole: the mesh records no grid, nor that a grid "
+    "cut it; pass --grid VOLUME to judge them against the volume's grid"
 )
 #: What the report says of a label mesh (``--labels --single-file``).
 LABEL_NOTE = (
@@ -225,7 +235,8 @@ def _stored_precision(info: dict, vertices: np.ndarray) -> str:
 
 
 class _Frame:
-    """Tells whether points lie on a face of the grid (or of the bounding box).
+    """Tells whether points lie on a face of the grid (or of the bounding box,
+    for a mesh that records that a grid cut it; else of nothing: ``name`` "none").
 
     ``used`` becomes True once a non-empty set of points has been judged.
     """
@@ -246,7 +257,9 @@ class _Frame:
             self._hi = shape - 1.0
             self._nd = nd
         else:
-            self.name = "bounding box"
+            # a mesh's own bounding box excuses the boundary edges on its faces only
+            # when the mesh was cut by a grid: an open box would otherwise pass
+            self.name = "bounding box" if info.get("cut_by_grid") is True else "none"
             self._origin = None
             self._nd = 3
             self._lo = None  # the box is measured on first use (most meshes need no box)
@@ -279,6 +292,8 @@ class _Frame:
         """
         if len(points):
             self.used = True
+        if self.name == "none":
+            return np.zeros((len(points), 6), dtype=bool)
         p = points[:, : self._nd]
         # stored coordinates are off by up to roundoff * |p|; with float64
         # arithmetic on top, 4 units of it bound the error comfortably
@@ -381,7 +396,9 @@ def check_mesh(
         ``{"shape", "origin", "affine"}`` as :func:`grid_from_volume` makes it:
         judge boundaries against this grid instead of ``mesh.info["grid"]``.
         With neither, boundaries are judged against the mesh's bounding box
-        and, when there are any, ``notes`` says so.
+        when ``mesh.info["cut_by_grid"]`` is True (the mesh was extracted from
+        a volume whose grid is not recorded), else every boundary edge is a
+        hole; when there are any, ``notes`` says which.
 
     Returns
     -------
@@ -437,6 +454,8 @@ def check_mesh(
         report.checks = {check: False for check in report.checks}
     if frame.name == "bounding box" and frame.used:
         report.notes.append(BOUNDING_BOX_NOTE)
+    elif frame.name == "none" and frame.used:
+        report.notes.append(NO_FRAME_NOTE)
     return report
 
 
@@ -522,7 +541,15 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
     if not merging:
         tv = cells
 
-    # edges of the input, by vertex index, whose ends are at one position
+    # edges of the input, by vertex index, whose ends are at one position: two
+    # indices at one position (the kernel's list), or one index twice, as the
+    # edge (i, i) of a triangle (i, j, i) or (i, i, i); both kinds are among the
+    # triangles with a repeated position
+    if len(repeated):
+        corners = cells[repeated]
+        same = [corners[corners[:, j] == corners[:, (j + 1) % 3], j] for j in range(3)]
+        twice = np.concatenate(same).astype(np.int64)
+        collapsed = np.concatenate([collapsed, np.column_stack([twice, twice])])
     zero_keys = np.unique(collapsed[:, 0] * n_vertices + collapsed[:, 1])
     zero = np.column_stack([zero_keys // max(n_vertices, 1), zero_keys % max(n_vertices, 1)])
     problems["zero_length_edges"] = _problem(
@@ -537,7 +564,8 @@ def _check_triangles(vertices, cells, frame, n_examples) -> Report:
     # of zero area within rounding); see the module docstring
     if len(candidates):
         corners = tv[candidates]
-        norm = np.linalg.norm(triangle_cross(vertices, corners), axis=1)
+        with np.errstate(invalid="ignore", over="ignore"):  # inf - inf: non_finite_vertices
+            norm = np.linalg.norm(triangle_cross(vertices, corners), axis=1)
         flat = candidates[flat_among(vertices, corners, norm)]
     else:
         flat = candidates
@@ -747,8 +775,10 @@ def _check_segments(vertices, cells, frame, n_examples) -> Report:
     segs = inverse[cells]
     n_u = len(unique)
     problems: dict = {}
-    index_repeat = cells[:, 0] == cells[:, 1]
-    zero = (segs[:, 0] == segs[:, 1]) & ~index_repeat
+    # a segment whose ends are at one position, by two indices or by one index
+    # twice, has zero length and is degenerate (as a triangle that repeats a
+    # position is), whichever way its ends meet
+    zero = segs[:, 0] == segs[:, 1]
     problems["zero_length_segments"] = _problem(
         zero.sum(),
         [
@@ -757,7 +787,7 @@ def _check_segments(vertices, cells, frame, n_examples) -> Report:
         ],
     )
     problems["degenerate_segments"] = _problem(
-        index_repeat.sum(), [{"segment": int(s)} for s in np.flatnonzero(index_repeat)[:n_examples]]
+        zero.sum(), [{"segment": int(s)} for s in np.flatnonzero(zero)[:n_examples]]
     )
     keep = np.flatnonzero(segs[:, 0] != segs[:, 1])
     sv = segs[keep]
@@ -815,7 +845,7 @@ def _check_segments(vertices, cells, frame, n_examples) -> Report:
         "manifold": bool(len(branch) == 0),
         "oriented": bool(len(misdirected) == 0),
         "no-zero-length": bool(not zero.any()),
-        "no-degenerate": bool(not index_repeat.any()),
+        "no-degenerate": bool(not zero.any()),
         "no-duplicates": bool(len(dups) == 0),
         "no-holes": bool(len(inside) == 0),
     }
@@ -892,7 +922,10 @@ def format_report(report: Report) -> str:
             lines.append("    " + ", ".join(f"{k} {_short(v)}" for k, v in ex.items()))
     for note in report.notes:
         lines.append(f"  note: {note}")
-    if BOUNDING_BOX_NOTE not in report.notes:
+    if report.boundary_frame == "none":
+        if NO_FRAME_NOTE not in report.notes:
+            lines.append("  (no grid recorded: an open boundary would count as a hole)")
+    elif BOUNDING_BOX_NOTE not in report.notes:
         lines.append(f"  (boundaries judged against the {report.boundary_frame})")
     return "\n".join(lines)
 

@@ -208,6 +208,7 @@ def test_trimesh_written(tmp_path, sphere, fmt):
     )
     # the same report as the same mesh in a file of the same precision
     same = stored_mesh(Mesh(expected, sphere.cells), "ply" if fmt == "glb" else "obj")
+    del same.info["cut_by_grid"]  # isoconvert's file says a grid cut the mesh; trimesh's not
     counts = report_counts(got)
     # a 3MF always has a unit (millimeter unless it says otherwise): the report gives it
     assert counts["measures"].pop("unit", None) == ("mm" if fmt == "3mf" else None)

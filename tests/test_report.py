@@ -75,9 +75,13 @@ def test_sphere_with_a_hole():
     assert r.problems["boundary_edges_on_domain_boundary"]["count"] == 0
     assert not r.checks["no-holes"] and not r.checks["watertight"] and r.checks["manifold"]
     # without the grid, the bounding box's top is cut by the hole's rim: still "inside"
-    bare = check_mesh(Mesh(holed.vertices, holed.cells))
+    bare = check_mesh(Mesh(holed.vertices, holed.cells, info={"cut_by_grid": True}))
     assert bare.boundary_frame == "bounding box"
     assert bare.problems["boundary_edges_inside"]["count"] > 0
+    # and with no record that a grid cut it, every boundary edge is a hole
+    foreign = check_mesh(Mesh(holed.vertices, holed.cells))
+    assert foreign.boundary_frame == "none"
+    assert foreign.problems["boundary_edges_inside"]["count"] == int((uses == 1).sum())
 
 
 def test_surface_cut_by_the_grid_has_boundary_only_on_the_grid():

@@ -24,7 +24,7 @@ from isoconvert import report as report_module
 from isoconvert.geometry import flat_bound, flat_triangles, triangle_cross
 from isoconvert.graph import edge_table, merge_positions, mix64, row_groups
 from isoconvert.meshfile import read_mesh
-from isoconvert.report import BOUNDING_BOX_NOTE, _Frame, check_mesh
+from isoconvert.report import BOUNDING_BOX_NOTE, NO_FRAME_NOTE, _Frame, check_mesh
 
 # --- the reference ---------------------------------------------------------------------------
 
@@ -56,7 +56,7 @@ def reference_report(mesh: Mesh, examples: int = 5) -> dict:
             (min(a, b), max(a, b))
             for c in cells.tolist()
             for a, b in ((c[0], c[1]), (c[1], c[2]), (c[2], c[0]))
-            if rank[a] == rank[b] and a != b
+            if rank[a] == rank[b]  # one position: two indices, or one index twice
         }
     )
     problems["zero_length_edges"] = {
@@ -247,7 +247,9 @@ def reference_report(mesh: Mesh, examples: int = 5) -> dict:
             "per_component": components,
         },
         "measures": measures,
-        "notes": [BOUNDING_BOX_NOTE] if frame.name == "bounding box" and frame.used else [],
+        "notes": [{"bounding box": BOUNDING_BOX_NOTE, "none": NO_FRAME_NOTE}[frame.name]]
+        if frame.name != "grid" and frame.used
+        else [],
     }
 
 

@@ -216,7 +216,9 @@ def test_a_malformed_or_foreign_grid_comment_is_ignored(tmp_path, comment):
     back = read_mesh(path)
     assert "grid" not in back.info
     assert back.info["stored_precision"] == "float64"
-    assert report_dict(back)["boundary_frame"] == "bounding box"
+    # an isoconvert grid record, even a broken one, says that a grid cut the mesh
+    ours = comment.startswith("isoconvert grid")
+    assert report_dict(back)["boundary_frame"] == ("bounding box" if ours else "none")
     obj = tmp_path / "other.obj"
     obj.write_text(f"# {comment}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     back = read_mesh(obj)

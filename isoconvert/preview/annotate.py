@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from ..checks import CHECK_NAMES
 from .marks import PROBLEMS, Marks
 from .views import Layout, View
 
@@ -102,27 +103,55 @@ def _view_title(view: View, frame: str | None) -> str:
     return f"{view.name}, from {side}"
 
 
+#: What the footer says when the report finds nothing wrong.
+ALL_PASS = "no holes, non-manifold or zero-length edges found"
+
+
+def footer_items(marks: Marks | None) -> list[tuple[tuple[int, int, int] | None, str]]:
+    """The footer's legend: (swatch colour or None, text) per item, from the report.
+
+    Vertices that are NaN or infinite first (not drawn), then each drawn problem
+    with its count, then the checks the report fails; :data:`ALL_PASS` only
+    when the report fails none, so the picture never calls a mesh fine that
+    ``isoconvert check`` fails.
+    """
+    if marks is None:
+        return []
+    items: list[tuple[tuple[int, int, int] | None, str]] = []
+    if marks.non_finite:
+        n = marks.non_finite
+        items.append(
+            (None, f"{n:,} {'vertex is' if n == 1 else 'vertices are'} NaN/Inf: not drawn")
+        )
+    for name, (label, colour) in PROBLEMS.items():  # only what was found
+        count = marks.counts.get(name, 0)
+        if not count:
+            continue
+        shown = len(marks.edges.get(name, marks.points.get(name, ())))
+        items.append(
+            (colour, f"{label} {count:,}" + (f" ({shown:,} drawn)" if shown < count else ""))
+        )
+    if marks.failed and len(marks.failed) == len(CHECK_NAMES):
+        items.append((None, "check fails every test"))
+    elif marks.failed:
+        items.append((None, "check fails " + ", ".join(marks.failed)))
+    elif not items:
+        items.append((None, ALL_PASS))
+    return items
+
+
 def _footer(draw, layout: Layout, marks: Marks | None, scale: float, unit: str, ink, font) -> None:
-    """Legend (problem colours and counts) on the left, scale bar on the right."""
+    """Legend (:func:`footer_items`) on the left, scale bar on the right."""
     top = layout.height - layout.footer
     mid = top + layout.footer / 2
     x = 6.0
     swatch = max(6, round(layout.font * 0.8))
-    if marks is not None and not any(marks.counts.values()):
-        text = "no holes, non-manifold or zero-length edges found"
-        draw.text((x, mid), text, fill=ink, font=font, anchor="lm")
-        x += draw.textlength(text, font=font) + 10
-    elif marks is not None:  # only what was found, so the legend fits beside the scale bar
-        for name, (label, colour) in PROBLEMS.items():
-            count = marks.counts.get(name, 0)
-            if not count:
-                continue
-            shown = len(marks.edges.get(name, marks.points.get(name, ())))
-            text = f"{label} {count:,}" + (f" ({shown:,} drawn)" if shown < count else "")
+    for colour, text in footer_items(marks):
+        if colour is not None:
             draw.rectangle([x, mid - swatch / 2, x + swatch, mid + swatch / 2], fill=colour)
             x += swatch + 3
-            draw.text((x, mid), text, fill=ink, font=font, anchor="lm")
-            x += draw.textlength(text, font=font) + 10
+        draw.text((x, mid), text, fill=ink, font=font, anchor="lm")
+        x += draw.textlength(text, font=font) + 10
     # scale bar: a round length of at most a fifth of a panel's width
     length = _nice_length(0.2 * layout.panel[0] * scale)
     if length > 0:

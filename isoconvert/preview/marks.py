@@ -38,13 +38,21 @@ class Marks:
     counts : dict of str -> int
         How many the report found (may exceed what is drawn, see :data:`MAX_MARKS`).
     boundary_frame : str
-        What boundaries were judged against ("grid" or "bounding box").
+        What boundaries were judged against ("grid", "bounding box" or "none").
+    failed : list of str
+        The checks the report fails (:data:`isoconvert.checks.CHECK_NAMES`), so
+        that the picture says what ``isoconvert check`` says, drawn or not.
+    non_finite : int
+        Vertices with a NaN or infinite coordinate (not drawn; the report then
+        fails every check).
     """
 
     edges: dict = field(default_factory=dict)
     points: dict = field(default_factory=dict)
     counts: dict = field(default_factory=dict)
     boundary_frame: str = ""
+    failed: list = field(default_factory=list)
+    non_finite: int = 0
 
 
 def find_marks(mesh: Mesh, grid: dict | None = None, limit: int = MAX_MARKS, report=None) -> Marks:
@@ -68,6 +76,8 @@ def find_marks(mesh: Mesh, grid: dict | None = None, limit: int = MAX_MARKS, rep
         report = check_mesh(mesh, examples=limit, grid=grid)
     v = np.asarray(mesh.vertices, dtype=np.float64)
     marks = Marks(boundary_frame=report.boundary_frame)
+    marks.failed = [name for name, ok in report.checks.items() if not ok]
+    marks.non_finite = int(report.problems.get("non_finite_vertices", {}).get("count", 0))
     for name in PROBLEMS:
         problem = report.problems[name]
         marks.counts[name] = int(problem["count"])

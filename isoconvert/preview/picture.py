@@ -5,14 +5,14 @@ from __future__ import annotations
 import io
 import json
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import IsoconvertError
 from ..mesh import Mesh
-from .annotate import _axis_arrows, _draw_marks, _font, _footer, _ink, _view_title
+from .annotate import _axis_arrows, _draw_marks, _font, _footer, _ink, _view_title, footer_items
 from .marks import Marks, find_marks
 from .render import _render_surface, _renderer_check
 from .views import Layout, View, make_views
@@ -38,17 +38,26 @@ class Preview:
         The problems drawn (None when not checked).
     frame : str or None
         "LPS" or "RAS" when the axes are labelled anatomically.
+    footer : list of str
+        The legend's texts, as drawn in the footer (:func:`footer_items`).
     """
 
     image: np.ndarray
     views: list[View]
     marks: Marks | None
     frame: str | None = None
+    footer: list[str] = field(default_factory=list)
 
     def summary(self) -> dict:
-        """What the picture shows, as recorded in the PNG's text chunk."""
+        """What the picture shows, as recorded in the PNG's text chunk: the problem
+        counts drawn, the checks the report fails, the vertices not drawn for being
+        NaN or infinite, and the footer's texts."""
+        marks = self.marks
         return {
-            "problems": None if self.marks is None else dict(self.marks.counts),
+            "problems": None if marks is None else dict(marks.counts),
+            "failed_checks": None if marks is None else list(marks.failed),
+            "non_finite_vertices": None if marks is None else marks.non_finite,
+            "footer": list(self.footer),
             "scale": self.views[0].scale,
             "frame": self.frame,
         }
@@ -156,11 +165,19 @@ def render_preview(
     layout = Layout(*size)
     points = mesh.vertices[used & finite]
     views = make_views(np.array([points.min(axis=0), points.max(axis=0)]), layout)
-    if not finite.all():  # a NaN vertex would poison VTK's bounds: drop its triangles
+    drawn = mesh
+    if not finite.all():
+        # a NaN or infinite vertex would poison VTK's bounds and camera: its
+        # triangles are not drawn, and it is moved onto a drawn vertex (no triangle
+        # left uses it); the report, and so the marks and footer, keep the mesh as it is
         keep = finite[mesh.cells].all(axis=1)
+        vertices = mesh.vertices.copy()
+        vertices[~finite] = points[0]
         normals = mesh.normals
-        mesh = Mesh(mesh.vertices, mesh.cells[keep], info=mesh.info, normals=normals)
-    pixels = _render_surface(mesh, views, layout, rgb)
+        if normals is not None:
+            normals = np.where(finite[:, None], normals, 0.0)
+        drawn = Mesh(vertices, mesh.cells[keep], info=mesh.info, normals=normals)
+    pixels = _render_surface(drawn, views, layout, rgb)
     pixels[layout.height - layout.footer :] = rgb
     marks = None
     if problems:
@@ -184,7 +201,8 @@ def render_preview(
     draw.line([(0, ph), (layout.width, ph)], fill=grey, width=1)
     draw.line([(0, 2 * ph), (layout.width, 2 * ph)], fill=grey, width=1)
     _footer(draw, layout, marks, views[0].scale, str(mesh.info.get("unit", "")), ink, font)
-    return Preview(np.asarray(image), views, marks, frame)
+    footer = [text for _, text in footer_items(marks)]
+    return Preview(np.asarray(image), views, marks, frame, footer)
 
 
 def check_picture_output(output: str | Path, force: bool = False) -> Path:
@@ -258,9 +276,11 @@ def preview_file(
         The file cannot be read, holds no triangles, or the output cannot be
         written; no output file is left behind.
     """
+    from ..atomic import refuse_inputs
     from ..meshfile import read_mesh
 
     check_picture_output(output, force)  # before the work
+    refuse_inputs(output, [path])
     _renderer_check()
     mesh = read_mesh(path)
     for key, value in recorded_header(path).items():
