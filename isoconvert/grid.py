@@ -12,6 +12,7 @@ pickled and sent to a Dask worker, which then reads its own slabs.
 
 from __future__ import annotations
 
+import math
 import mmap
 from abc import ABC, abstractmethod
 from pathlib import Path
@@ -50,7 +51,7 @@ class LazyGrid(ABC):
 
     @property
     def size(self) -> int:
-        return int(np.prod(self.shape, dtype=np.int64))
+        return math.prod(self.shape)  # Python integers: never wraps
 
     @property
     def nbytes(self) -> int:

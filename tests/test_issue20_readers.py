@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from isoconvert import read_volume
-from isoconvert.errors import FormatError
+from isoconvert.errors import FormatError, VolumeError
 
 
 def _abs(*paths) -> set[str]:
@@ -630,3 +630,87 @@ def test_ascii_nrrd_count_must_match(tmp_path):
         read_volume(_ascii_nrrd(tmp_path / "v.nrrd", "uint8", "1 2 3 4 5"))
     with pytest.raises(FormatError, match="holds 7 numbers, but sizes 3 2 of uint8 need 6"):
         read_volume(_ascii_nrrd(tmp_path / "w.nrrd", "uint8", "1 2 3 4 5 6 7"))
+
+
+# --- 6. sizes whose product overflows 64 bits -----------------------------------------------
+
+# 2**32 * 2**32 * 2 samples: the product wraps to 0 in int64 (as "need 0" said)
+HUGE = (2**32, 2**32, 2)
+HUGE_SAMPLES = 2**65
+
+
+def test_nrrd_huge_sizes_give_the_true_byte_count(tmp_path):
+    path = tmp_path / "huge.nrrd"
+    path.write_bytes(
+        b"NRRD0004\ntype: short\nendian: little\ndimension: 3\nsizes: 4294967296 4294967296 2\n"
+        b"encoding: raw\n\n" + bytes(100)
+    )
+    with pytest.raises(FormatError) as err:
+        read_volume(path)
+    assert (
+        f"the file holds 100 bytes of samples, but sizes 4294967296 4294967296 2 of short "
+        f"need {HUGE_SAMPLES * 2};" in str(err.value)
+    )
+    # split over data files: the count of slices is exact too
+    detached = tmp_path / "huge.nhdr"
+    (tmp_path / "part.1").write_bytes(bytes(100))
+    (tmp_path / "part.2").write_bytes(bytes(100))
+    (tmp_path / "part.3").write_bytes(bytes(100))
+    detached.write_text(
+        "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 4294967296 4294967296\nencoding: raw\n"
+        "data file: part.%d 1 3 1 1\n\n"
+    )
+    with pytest.raises(FormatError, match=f"3 data files cannot split {2**64} slices evenly"):
+        read_volume(detached)
+
+
+def test_metaimage_huge_dimsize_gives_the_true_byte_count(tmp_path):
+    path = tmp_path / "huge.mha"
+    path.write_bytes(
+        b"NDims = 3\nDimSize = 4294967296 4294967296 2\nElementType = MET_USHORT\n"
+        b"ElementDataFile = LOCAL\n" + bytes(100)
+    )
+    with pytest.raises(FormatError) as err:
+        read_volume(path)
+    assert f"DimSize 4294967296 4294967296 2 of MET_USHORT need {HUGE_SAMPLES * 2};" in str(
+        err.value
+    )
+
+
+def test_raw_huge_shape_gives_the_true_byte_count(tmp_path):
+    path = tmp_path / "huge.raw"
+    path.write_bytes(bytes(100))
+    with pytest.raises(VolumeError) as err:
+        read_volume(path, shape=HUGE, dtype="float32")
+    assert f"with 0 header bytes needs {HUGE_SAMPLES * 4};" in str(err.value)
+
+
+def test_npy_huge_shape_gives_the_true_byte_count(tmp_path):
+    path = tmp_path / "huge.npy"
+    with open(path, "wb") as fh:
+        header = {"descr": "<u2", "fortran_order": False, "shape": HUGE[::-1]}
+        np.lib.format.write_array_header_1_0(fh, header)
+        fh.write(bytes(100))
+    with pytest.raises(FormatError) as err:
+        read_volume(path)
+    assert f"({HUGE_SAMPLES * 2} bytes)" in str(err.value)
+
+
+def test_nifti2_huge_dims_give_the_true_byte_count(tmp_path):
+    nib = pytest.importorskip("nibabel")
+    header = nib.Nifti2Header()
+    header.set_data_dtype(np.uint8)
+    header.set_data_shape(HUGE)
+    header["vox_offset"] = 544
+    path = tmp_path / "huge.nii"
+    path.write_bytes(header.binaryblock + bytes(4) + bytes(100))
+    with pytest.raises(FormatError) as err:
+        read_volume(path)
+    assert f"4294967296x4294967296x2 of uint8 ({HUGE_SAMPLES} bytes)" in str(err.value)
+
+
+def test_lazy_grid_size_never_wraps():
+    from isoconvert.grid import RawGrid
+
+    grid = RawGrid(Path("nothing.raw"), np.dtype(np.uint16), HUGE, 0)
+    assert grid.size == HUGE_SAMPLES and grid.nbytes == 2 * HUGE_SAMPLES

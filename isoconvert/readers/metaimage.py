@@ -22,6 +22,7 @@ caller allows otherwise (``allow_outside_data``).
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import zlib
@@ -319,7 +320,8 @@ def _read_samples(header, files, subdim, sizes, channels, dtype, described):
     """
     path = header.path
     ndims = len(sizes)
-    total = int(np.prod(sizes, dtype=np.int64)) * channels
+    # Python integers: a header may declare sizes whose product overflows 64 bits
+    total = math.prod(sizes) * channels
     nbytes = total * dtype.itemsize
     shape_zyx = tuple(sizes[::-1]) + ((channels,) if channels > 1 else ())
     compressed = header.flag("CompressedData")
@@ -382,13 +384,13 @@ def _header_size(header: _Header) -> int:
 def _read_parts(header, files, subdim, sizes, shape_zyx, dtype, described):
     """Samples split over several files (a LIST or a pattern), each holding ``subdim`` axes."""
     path = header.path
-    outer = int(np.prod(sizes[subdim:], dtype=np.int64))
+    outer = math.prod(sizes[subdim:])
     if len(files) > outer or outer % len(files):
         raise FormatError(
             f"{path}: {len(files)} data files cannot split {outer} slices evenly; check "
             "ElementDataFile and DimSize"
         )
-    total = int(np.prod(shape_zyx, dtype=np.int64))
+    total = math.prod(shape_zyx)
     check_fits(total * dtype.itemsize, "the declared volume", str(path))
     out = np.empty(total, dtype=dtype)
     per = total // len(files)

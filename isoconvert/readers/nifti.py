@@ -21,6 +21,7 @@ A 4D image needs ``volume_index``; 5D and more are refused. A 2D image (or a
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -120,7 +121,7 @@ def read_nifti(path: Path, options: ReadOptions) -> Volume:
     flat = len(xyz) == 2 or xyz[2] == 1
     # the proxy's offset: nibabel reads vox_offset 0 in a single file as 352 (the minimum)
     offset = int(getattr(img.dataobj, "offset", header.get_data_offset()))
-    per_volume = int(np.prod(xyz, dtype=np.int64)) * dtype.itemsize
+    per_volume = math.prod(xyz) * dtype.itemsize  # Python integers: never wraps
     if not scaled and not flat and not _gzipped(path) and dtype.kind in "biuf":
         start = offset + (index or 0) * per_volume
         have = os.path.getsize(path) - start

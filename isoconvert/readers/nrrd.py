@@ -16,6 +16,7 @@ able to make the tool read any file on the machine.
 from __future__ import annotations
 
 import bz2
+import math
 import os
 import re
 import threading
@@ -294,7 +295,7 @@ def _subdim(path: Path, text: str | None, ndim: int) -> int:
 
 
 def _check_split(path: Path, n_files: int, sizes: list[int], subdim: int) -> None:
-    outer = int(np.prod(sizes[subdim:], dtype=np.float64))
+    outer = math.prod(sizes[subdim:])
     if n_files > outer or outer % n_files:
         raise FormatError(
             f"{path}: {n_files} data files cannot split {outer} slices evenly; "
@@ -344,7 +345,8 @@ def _read_data(
 
     header = parsed.fields
     sizes = [int(s) for s in header["sizes"]]
-    total = int(np.prod(sizes, dtype=np.int64))
+    # Python integers: a header may declare sizes whose product overflows 64 bits
+    total = math.prod(sizes)
     key = str(header.get("encoding", "")).strip()
     encoding = _ENCODINGS.get(key.lower())
     if encoding is None:

@@ -18,6 +18,7 @@ is a lazy :class:`~isoconvert.grid.RawGrid` on the file.
 
 from __future__ import annotations
 
+import math
 import zipfile
 from pathlib import Path
 
@@ -106,7 +107,8 @@ def _read_npy(path: Path) -> Volume:
         offset = fh.tell()
     _check_ndim(shape, path)
     dtype = _check_dtype(dtype, path)
-    nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    # Python integers: a header may declare a shape whose product overflows 64 bits
+    nbytes = math.prod(shape) * dtype.itemsize
     size = path.stat().st_size
     if size - offset < nbytes:
         raise FormatError(
@@ -173,11 +175,11 @@ def _read_npz(path: Path, key: str | None) -> Volume:
         where = f" {key!r}"
         _check_ndim(shape, path, where)
         read_as = _check_dtype(dtype, path, where)
-        nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+        nbytes = math.prod(shape) * dtype.itemsize
         check_fits(nbytes, f"the array {key!r}", str(path))
         with archive.open(info) as fh:
             _header(fh, path, where)
-            out = np.empty(int(np.prod(shape, dtype=np.int64)), dtype=dtype)
+            out = np.empty(math.prod(shape), dtype=dtype)
             view = memoryview(out.view(np.uint8))
             got = 0
             # reads stop at the declared size: a member cannot inflate past it

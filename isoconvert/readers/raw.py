@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -91,7 +92,8 @@ def read_raw(path: Path, options: ReadOptions) -> Volume:
     dtype = dtype_from_name(dtype_name, str(path)).newbyteorder(
         "<" if options.endian == "little" else ">"
     )
-    expected = options.header_bytes + int(np.prod(shape)) * dtype.itemsize
+    # Python integers: sizes whose product overflows 64 bits give the true, huge count
+    expected = options.header_bytes + math.prod(int(n) for n in shape) * dtype.itemsize
     actual = path.stat().st_size
     if actual != expected:
         dims = "x".join(map(str, shape))

@@ -101,7 +101,7 @@ def _read_file(path: Path, channel: int | None, spec: str):
         index, axes = _selection(series.axes, series.shape, channel, path)
         data = _page_grid(tif, series, index, spec) if len(axes) == 3 else None
         if data is None:
-            declared = int(np.prod(series.shape, dtype=np.float64)) * series.dtype.itemsize
+            declared = math.prod(series.shape) * series.dtype.itemsize
             check_fits(declared, "the declared image series", spec)
             data = _pick_channel(series.asarray(), series.axes, channel, path)
         spacing, unit, notes = _spacing(tif, data.ndim)
