@@ -714,3 +714,18 @@ def test_lazy_grid_size_never_wraps():
 
     grid = RawGrid(Path("nothing.raw"), np.dtype(np.uint16), HUGE, 0)
     assert grid.size == HUGE_SAMPLES and grid.nbytes == 2 * HUGE_SAMPLES
+
+
+def test_nrrd_ignored_directions_keep_their_note_but_not_the_spacing_advice(tmp_path):
+    path = tmp_path / "v.nrrd"
+    path.write_bytes(
+        b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 5 3 4\nencoding: raw\n"
+        b"space: left-posterior-superior\nspace directions: (0.5,0,0) (0,0.25,0) (0,0,0)\n\n"
+        + zyx_field().tobytes()
+    )
+    alone = read_volume(path)
+    assert alone.spacing.tolist() == [1, 1, 1]
+    assert "no spacing in the file; using 1 (set --spacing)" in alone.notes
+    given = read_volume(path, spacing=(1, 2, 3)).notes
+    assert not any("--spacing" in n for n in given)
+    assert any(n.startswith("space directions in the NRRD header ignored") for n in given)

@@ -897,14 +897,15 @@ def _placement(header: dict, domain: list[int]):
             spacing = np.linalg.norm(rows, axis=1)
             if np.all(spacing > 0) and abs(np.linalg.det(rows / spacing[:, None])) > 1e-6:
                 return spacing, (rows / spacing[:, None]).T, notes
+            # what replaces the spacing is said below (a note --spacing removes)
             notes.append(
                 "space directions in the NRRD header ignored (a zero-length or parallel "
-                "vector); set --spacing"
+                "vector); the axes are taken as x, y, z"
             )
         else:
             notes.append(
                 "space directions in the NRRD header ignored (not one finite vector per "
-                "spatial axis); set --spacing"
+                "spatial axis); the axes are taken as x, y, z"
             )
     spacings = header.get("spacings")
     if spacings is not None:
