@@ -454,6 +454,7 @@ def test_dicom_multiframe_with_zero_pixel_spacing_takes_the_given_spacing(tmp_pa
     )
     vol = read_volume(path, spacing=(0.3, 0.4, 1.5))
     assert vol.spacing.tolist() == [0.3, 0.4, 1.5]
+    assert vol.files == tuple(_abs(path))  # a multi-frame file is read alone
     assert np.array_equal(vol.data, frames.T)
     assert not any("PixelSpacing" in n for n in vol.notes)
     alone = read_volume(path)
