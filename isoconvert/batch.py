@@ -123,7 +123,12 @@ def discover(
     read yet with what ``readers.unsupported_format`` says; the DICOM files of
     a folder (``.dcm``, ``.dicom`` or the DICOM magic) are one volume, the folder.
     Symbolic links to folders are followed once (a loop is cut where it closes);
-    a file reached twice is converted once. ``exclude`` (the output folder) is never searched.
+    a file reached twice is converted once. ``exclude`` (the output folder) is not
+    searched when met inside an input folder (its files are skipped, as one entry
+    saying so); when it is an input folder itself, that folder is searched, as
+    asked (meshes there are never taken for volumes: no mesh format is a volume
+    format). Preview pictures ``batch --previews`` wrote are skipped, saying so,
+    never taken for images.
 
     Parameters
     ----------
@@ -132,7 +137,7 @@ def discover(
     recursive : bool
         Search sub-folders of folders (and ``**`` in globs).
     exclude : Path or None
-        A folder never searched (the output folder).
+        The output folder: not searched inside an input folder.
     images : bool
         Keep 2D images. Without it, image files (the ``image`` reader's
         suffixes), single-page 2D TIFFs that form no slice stack and 2D NRRD
@@ -236,14 +241,26 @@ def check_found(inputs: list[str], found: list[Found], skipped: list[Skipped]) -
         raise NoVolumesError(inputs, skipped)
 
 
+#: Why the output folder's files, met inside an input folder, are not converted.
+OUTPUT_FOLDER_REASON = "the output folder (-o), which is not searched for volumes"
+#: Why a preview picture (``batch --previews``) is not converted.
+PREVIEW_REASON = "a preview picture isoconvert wrote (batch --previews), not a volume"
+
+
 def _walk(root: Path, recursive: bool, excluded, found, skipped, images: bool) -> None:
     seen: set[str] = set()
+    top = Path(os.path.realpath(root))
     for folder, dirs, files in os.walk(root, followlinks=True):
         real = os.path.realpath(folder)
-        if real in seen or (excluded and Path(real) == excluded):
+        # the output folder inside an input: its meshes and pictures are outputs, not
+        # inputs; the output folder named as an input is searched, as asked
+        output = excluded is not None and Path(real) == excluded and Path(real) != top
+        if real in seen or output:
             dirs[:] = []
             if real in seen:
                 skipped.append(Skipped(folder, "a link back to a folder already searched"))
+            elif count := sum(len(f) for _, _, f in os.walk(folder)):
+                skipped.append(Skipped(folder, OUTPUT_FOLDER_REASON, count))
             continue
         seen.add(real)
         dirs.sort(key=lambda d: natural_key(Path(d)))
@@ -317,6 +334,9 @@ def _add_files(paths: list[Path], root: Path, found, skipped, images: bool = Fal
         if match is None:
             skipped.append(Skipped(str(p), unsupported_format(p) or UNKNOWN_REASON))
             continue
+        if match[0] == "image" and _is_preview(p):
+            skipped.append(Skipped(str(p), PREVIEW_REASON))
+            continue
         if not images and _is_2d_image(p, match[0]):
             skipped.append(Skipped(str(p), IMAGE_REASON))
             continue
@@ -371,6 +391,15 @@ def _add_dicom_series(folder: Path, rel: Path, size: int, found, skipped) -> Non
         part = size * s.files // total
         name = rel.with_name(f"{rel.name}_{suffix}")
         found.append(Found(str(folder), name, part, {"series": s.uid}, shown))
+
+
+def _is_preview(path: Path) -> bool:
+    """Whether ``path`` is a preview PNG isoconvert wrote (it records its summary)."""
+    if path.suffix.lower() != ".png":
+        return False
+    from .preview.sheet import read_summary
+
+    return read_summary(path) is not None
 
 
 def _is_2d_image(path: Path, reader: str) -> bool:
@@ -672,6 +701,51 @@ def _add_job(
         return
     estimate = MEMORY_FACTOR * f.size + MEMORY_BASE
     jobs.append(Job(f.spec, str(output), job_level, job_options, estimate, f.name))
+
+
+def drop_outputs(
+    skipped: list[Skipped],
+    jobs: Sequence[Job],
+    done: Sequence[Outcome],
+    previews: bool = False,
+    also: Sequence[str | Path] = (),
+) -> list[Skipped]:
+    """``skipped`` without the files this batch writes: its meshes (label meshes
+    included), their thumbnails with ``previews``, and ``also`` (the contact sheet,
+    the summary). A batch writing into its own input folder finds its earlier
+    outputs there; they are outputs, not inputs skipped.
+
+    Parameters
+    ----------
+    skipped : list of Skipped
+        What :func:`discover` skipped.
+    jobs, done : sequences of Job and Outcome
+        What :func:`plan` returned (the outputs to write, and those not rewritten).
+
+    Returns
+    -------
+    list of Skipped
+    """
+    names: set[str] = {os.path.realpath(p) for p in also}
+    patterns: list[str] = []
+    for item in [*jobs, *done]:
+        if not item.output:
+            continue
+        out = Path(item.output)
+        names.add(os.path.realpath(out))
+        if previews:
+            names.add(os.path.realpath(out.with_suffix(".png")))
+        if isinstance(item, Job) and item.level == "labels":
+            stem = os.path.realpath(out.with_suffix(""))
+            patterns.append(globlib.escape(stem) + "_label*" + out.suffix)
+            if previews:
+                patterns.append(globlib.escape(stem) + "_label*.png")
+    return [
+        s
+        for s in skipped
+        if os.path.realpath(s.path) not in names
+        and not any(fnmatch.fnmatchcase(os.path.realpath(s.path), p) for p in patterns)
+    ]
 
 
 def _output_name(relative: Path, suffix: str) -> Path:

@@ -1080,8 +1080,10 @@ def batch(
     batching.check_jobs(jobs)
     if previews:  # before the work: without a renderer there would be no pictures
         from .preview import require_renderer
+        from .preview.sheet import check_contact_sheet
 
         require_renderer()
+        check_contact_sheet(out_dir)  # and never over a page of the user's own
     if not level and levels is None and not labels:
         raise VolumeError("batch needs --level (a number or auto), --levels FILE or --labels")
     if out_dir.exists() and not out_dir.is_dir():
@@ -1132,7 +1134,10 @@ def batch(
         raw_options={k: v for k, v in raw.items() if v is not None},
         labels=labels,
     )
-    for item in skipped:
+    # a batch into its own input folder meets its earlier outputs: not inputs skipped
+    written = [out_dir / "index.html"] if previews else []
+    written += [summary] if summary is not None else []
+    for item in batching.drop_outputs(skipped, work, outcomes, previews, written):
         outcomes.append(batching.Outcome(item.path, "", "skipped", message=item.reason))
     from .convert import ConvertOptions
     from .distributed import scheduler_address

@@ -332,3 +332,225 @@ def test_any_step_that_empties_the_mesh_is_refused(monkeypatch):
     monkeypatch.setattr(decimation, "decimate", nothing)
     with pytest.raises(EmptyMeshError, match=r"^b\.npy: decimation removed every triangle;"):
         post_process(mesh, volume, PostOptions(decimate=0.5), ambiguity="", flip=False, nan_as=None)
+
+
+# --- batch into its own input folder ----------------------------------------------------------
+
+
+def hashes(folder) -> dict:
+    import hashlib
+
+    return {
+        p.relative_to(folder).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.fixture
+def scans(tmp_path):
+    """in/ with two volumes and a note."""
+    import shutil
+
+    from conftest import SAMPLES
+
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(SAMPLES / "sphere.nrrd", src)
+    shutil.copy(SAMPLES / "torus.nrrd", src)
+    (src / "notes.txt").write_text("not a volume")
+    return src
+
+
+def summary_rows(path) -> tuple[dict, dict]:
+    data = json.loads(path.read_text())
+    return {r["input"]: r for r in data["files"]}, data["totals"]
+
+
+def test_batch_into_its_own_input_folder_converts_and_takes_no_output_for_input(
+    scans, tmp_path, capsys
+):
+    before = hashes(scans)
+    report = tmp_path / "s.json"
+    code, out, err = run(
+        capsys, "batch", scans, "-o", scans, "-l", "0.75", "-j", "1", "--summary", report
+    )
+    assert code == 0, err
+    assert "no volumes found" not in err
+    rows, totals = summary_rows(report)
+    assert totals["ok"] == 2 and totals["skipped"] == 1  # notes.txt, honestly
+    assert {p.name for p in scans.iterdir()} == {
+        "sphere.nrrd", "torus.nrrd", "notes.txt", "sphere.ply", "torus.ply",
+    }  # fmt: skip
+    assert all(hashes(scans)[name] == h for name, h in before.items())  # inputs untouched
+    # again: the meshes of the first run are outputs to replace, not inputs skipped
+    code, out, err = run(
+        capsys, "batch", scans, "-o", scans, "-l", "0.75", "-j", "1", "--force",
+        "--summary", report, "--force",
+    )  # fmt: skip
+    assert code == 0, err
+    rows, totals = summary_rows(report)
+    assert sorted(rows) == sorted(
+        str(scans / n) for n in ("sphere.nrrd", "torus.nrrd", "notes.txt")
+    )
+    assert totals["ok"] == 2 and totals["skipped"] == 1
+    assert "sphere.ply" not in out and "torus.ply" not in out  # the table lists no outputs
+
+
+def test_an_output_folder_inside_the_input_is_not_searched_and_says_so(scans, tmp_path, capsys):
+    import shutil
+
+    from isoconvert.batch import OUTPUT_FOLDER_REASON, discover
+
+    meshes = scans / "meshes"
+    code, _, err = run(capsys, "batch", scans, "-r", "-o", meshes, "-l", "0.75", "-j", "1")
+    assert code == 0, err
+    # a volume put into the output folder is not converted on the next run: it is skipped,
+    # and the reason says why
+    shutil.copy(scans / "sphere.nrrd", meshes / "copy.nrrd")
+    found, skipped = discover([str(scans)], recursive=True, exclude=meshes)
+    assert sorted(f.relative.name for f in found) == ["sphere.nrrd", "torus.nrrd"]
+    entry = next(s for s in skipped if s.reason == OUTPUT_FOLDER_REASON)
+    assert entry.path == str(meshes) and entry.files == 3  # sphere.ply, torus.ply, copy.nrrd
+    # when the output folder holds the only volume, "no volumes found" says where it is
+    lone = tmp_path / "lone"
+    (lone / "meshes").mkdir(parents=True)
+    shutil.copy(scans / "sphere.nrrd", lone / "meshes")
+    code, _, err = run(capsys, "batch", lone, "-r", "-o", lone / "meshes", "-l", "0.75")
+    one_line_error(code, err, "no volumes found", "1 file skipped: the output folder (-o)")
+
+
+def fake_preview(path):
+    """A PNG recording a preview summary, as isoconvert's previews do."""
+    from PIL import Image, PngImagePlugin
+
+    from isoconvert.preview.picture import PNG_KEY
+
+    info = PngImagePlugin.PngInfo()
+    info.add_text(PNG_KEY, json.dumps({"problems": {}}))
+    Image.new("RGB", (8, 8), "white").save(path, pnginfo=info)
+
+
+def test_previews_in_the_input_folder_are_not_taken_for_images(scans):
+    from PIL import Image
+
+    from isoconvert.batch import PREVIEW_REASON, discover
+
+    fake_preview(scans / "sphere.png")
+    Image.new("L", (8, 8), 5).save(scans / "photo.png")
+    found, skipped = discover([str(scans)], images=True)
+    assert sorted(f.relative.name for f in found) == ["photo.png", "sphere.nrrd", "torus.nrrd"]
+    assert [s.reason for s in skipped if s.path.endswith("sphere.png")] == [PREVIEW_REASON]
+
+
+def test_previews_never_replace_a_picture_that_is_not_one(scans, tmp_path, capsys):
+    pytest.importorskip("vtkmodules")
+    from PIL import Image
+
+    from isoconvert.preview import RenderError, require_renderer
+
+    try:
+        require_renderer()
+    except RenderError as why:
+        pytest.skip(str(why))
+    Image.new("L", (8, 8), 5).save(scans / "sphere.png")  # the user's picture of the scan
+    before = hashes(scans)
+    report = tmp_path / "s.json"
+    # a glob of the volumes, writing beside them (as before this issue's fix, too)
+    volumes = str(scans / "*.nrrd")
+    code, _, err = run(
+        capsys, "batch", volumes, "-o", scans, "-l", "0.75", "-j", "1", "--previews",
+        "--summary", report,
+    )  # fmt: skip
+    assert code == 0, err
+    assert all(hashes(scans)[name] == h for name, h in before.items())
+    rows, _ = summary_rows(report)
+    assert "sphere.png exists and is not a preview" in rows[str(scans / "sphere.nrrd")]["message"]
+    assert (scans / "torus.png").is_file()  # the other thumbnail is written
+    # a page of the user's own named index.html is refused before any work
+    (scans / "index.html").write_text("<html>my notes</html>")
+    before = hashes(scans)
+    code, _, err = run(
+        capsys, "batch", volumes, "-o", scans, "-l", "0.75", "--previews", "--force"
+    )  # fmt: skip
+    one_line_error(code, err, "index.html", "not a contact sheet isoconvert wrote")
+    assert hashes(scans) == before
+
+
+# --- the contact sheet counts as batch does -----------------------------------------------------
+
+
+class _Sheet:
+    """What a contact sheet shows: its totals, its cards, the files listed as skipped."""
+
+    def __init__(self, text: str) -> None:
+        from html.parser import HTMLParser
+
+        sheet = self
+        self.totals: dict[str, int] = {}
+        self.cards: list[dict] = []
+        self.skipped: list[str] = []
+
+        class Parser(HTMLParser):
+            def __init__(self):
+                super().__init__()
+                self.stack: list[tuple[str, dict]] = []
+
+            def handle_starttag(self, tag, attrs):
+                attrs = dict(attrs)
+                self.stack.append((tag, attrs))
+                if tag == "figure":
+                    sheet.cards.append({"class": attrs.get("class"), "text": ""})
+                if tag == "li":
+                    sheet.skipped.append("")
+
+            def handle_endtag(self, tag):
+                while self.stack and self.stack.pop()[0] != tag:
+                    pass
+
+            def handle_data(self, data):
+                tags = [t for t, _ in self.stack]
+                if self.stack and self.stack[-1][0] == "span":
+                    status = self.stack[-1][1].get("data-status")
+                    if status is not None:
+                        sheet.totals[status] = int(data.split()[0].replace(",", ""))
+                if "figure" in tags:
+                    sheet.cards[-1]["text"] += data
+                if "li" in tags:
+                    sheet.skipped[-1] += data
+
+        Parser().feed(text)
+
+
+def test_contact_sheet_shows_skipped_files_apart_and_counts_as_batch(scans, tmp_path, capsys):
+    pytest.importorskip("vtkmodules")
+    from isoconvert.preview import RenderError, require_renderer
+
+    try:
+        require_renderer()
+    except RenderError as why:
+        pytest.skip(str(why))
+    (scans / "MANIFEST.md").write_text("# scans\n")
+    (scans / "make.py").write_text("print('hi')\n")
+    out = tmp_path / "out"
+    report = tmp_path / "s.json"
+    code, stdout, err = run(
+        capsys, "batch", scans, "-o", out, "-l", "0.75", "-j", "1", "--previews",
+        "--summary", report,
+    )  # fmt: skip
+    assert code == 0, err
+    _, totals = summary_rows(report)
+    totals = {k: v for k, v in totals.items() if v}
+    sheet = _Sheet((out / "index.html").read_text())
+    assert sheet.totals == totals == {"ok": 2, "skipped": 3}
+    # the printed table's last line says the same
+    printed = dict(
+        (status, int(n)) for n, status in re.findall(r"(\d+) ([\w-]+)", stdout.splitlines()[-1])
+    )
+    assert printed == totals
+    # a card per volume, none of them a failure; the three other files listed apart
+    assert len(sheet.cards) == 2 and {c["class"] for c in sheet.cards} == {"good"}
+    assert sorted(s.split(":")[0] for s in sheet.skipped) == sorted(
+        str(scans / n) for n in ("MANIFEST.md", "make.py", "notes.txt")
+    )
+    assert all("not a volume format" in s for s in sheet.skipped)

@@ -10,13 +10,18 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import IsoconvertError
+from ..errors import IsoconvertError, OutputError
 from ..mesh import Mesh
 from .marks import PROBLEMS
 from .picture import PNG_KEY, render_preview, write_preview
 
 #: Thumbnail size for ``batch --previews``.
 THUMBNAIL_SIZE = (400, 300)
+#: How a contact sheet's page starts its title: an ``index.html`` without it is
+#: someone else's page, never replaced.
+SHEET_TITLE = "<title>isoconvert previews</title>"
+#: Statuses of a conversion that went wrong (a red frame on the sheet).
+BAD_STATUSES = ("failed", "check-failed", "interrupted")
 
 
 # --- the contact sheet ------------------------------------------------------------------------
@@ -66,8 +71,37 @@ class SheetEntry:
     message: str = ""
 
 
+def status_counts(entries: Sequence[SheetEntry]) -> dict[str, int]:
+    """Entries per status, in order of first appearance: the totals line that
+    ``batch`` prints under its table, so that the sheet says the same.
+
+    Parameters
+    ----------
+    entries : sequence of SheetEntry
+
+    Returns
+    -------
+    dict of str to int
+    """
+    counts: dict[str, int] = {}
+    for e in entries:
+        counts[e.status] = counts.get(e.status, 0) + 1
+    return counts
+
+
+def _not_converted(entry: SheetEntry) -> bool:
+    """A file batch skipped as no volume (no mesh of it was ever planned)."""
+    return entry.status == "skipped" and not entry.output
+
+
 def contact_sheet(entries: Sequence[SheetEntry], folder: str | Path) -> str:
     """An HTML page of thumbnails, openable from disk (links relative to ``folder``).
+
+    A card per volume (converted, failed, or skipped because its mesh exists);
+    the files skipped as no volume (notes, scripts) are listed apart, with
+    their reasons, and are not failures. The totals line counts every entry
+    by status, as ``batch``'s summary does (``<span class="count"
+    data-status="ok">``).
 
     Parameters
     ----------
@@ -93,6 +127,8 @@ def contact_sheet(entries: Sequence[SheetEntry], folder: str | Path) -> str:
 
     cards = []
     for e in entries:
+        if _not_converted(e):
+            continue
         mesh = Path(e.output) if e.output else None
         thumb = thumbnail_name(mesh) if mesh else None
         summary = read_summary(thumb) if thumb and thumb.is_file() else None
@@ -117,35 +153,84 @@ def contact_sheet(entries: Sequence[SheetEntry], folder: str | Path) -> str:
             "" if e.vertices is None else f"{e.vertices:,} vertices, {e.cells or 0:,} triangles",
             f"report: {html.escape(report)}" if report else "",
         ]
-        klass = "bad" if (e.status != "ok" or found) else "good"
+        if e.status in BAD_STATUSES or found:
+            klass = "bad"
+        else:
+            klass = "skipped" if e.status == "skipped" else "good"
         cards.append(
             f'<figure class="{klass}">{picture}<figcaption><b>{link}</b><br>'
             + "<br>".join(f for f in facts if f)
             + f'<br><span class="status">{html.escape(status)}</span></figcaption></figure>'
         )
+    totals = ", ".join(
+        f'<span class="count" data-status="{html.escape(status, quote=True)}">'
+        f"{n:,} {html.escape(status)}</span>"
+        for status, n in status_counts(entries).items()
+    )
+    others = [e for e in entries if _not_converted(e)]
+    listed = ""
+    if others:
+        items = "".join(
+            f"<li>{html.escape(e.input)}: {html.escape(e.message or 'skipped')}</li>"
+            for e in others
+        )
+        listed = (
+            f"\n<h2>Not converted: {len(others):,} file{'s' if len(others) != 1 else ''} "
+            f'skipped</h2>\n<ul class="skipped">{items}</ul>'
+        )
     return (
         '<!DOCTYPE html>\n<html><head><meta charset="utf-8">'
-        "<title>isoconvert previews</title><style>"
+        f"{SHEET_TITLE}<style>"
         "body{font-family:sans-serif;margin:1em}"
         "figure{display:inline-block;vertical-align:top;width:410px;margin:6px;"
         "border:1px solid #ccc;padding:4px}"
-        "figure.bad{border-color:#e00}img{width:400px}"
+        "figure.bad{border-color:#e00}figure.skipped{border-color:#999}img{width:400px}"
         ".none{width:400px;height:300px;background:#eee;line-height:300px;text-align:center}"
         "figcaption{font-size:13px;word-wrap:break-word}.status{color:#555}"
+        "ul.skipped{color:#555;font-size:13px}"
         "</style></head><body>\n"
-        f"<h1>isoconvert previews ({len(entries)} files)</h1>\n"
-        + "\n".join(cards)
-        + "\n</body></html>\n"
+        "<h1>isoconvert previews</h1>\n"
+        f'<p class="totals">{totals}</p>\n' + "\n".join(cards) + listed + "\n</body></html>\n"
     )
+
+
+def check_contact_sheet(folder: str | Path, name: str = "index.html") -> Path:
+    """Fail before a batch's work when ``folder/name`` is a file isoconvert did not
+    write (a page of the user's own, in a batch into its input folder).
+
+    Returns
+    -------
+    Path
+        Where the sheet goes.
+
+    Raises
+    ------
+    OutputError
+        The file exists and is no contact sheet, or is no regular file.
+    """
+    path = Path(folder) / name
+    if path.exists() or path.is_symlink():
+        try:
+            with open(path, "rb") as fh:
+                head = fh.read(4096).decode("utf-8", errors="replace")
+        except OSError:
+            head = ""
+        if not path.is_file() or SHEET_TITLE not in head:
+            raise OutputError(
+                f"{path}: exists and is not a contact sheet isoconvert wrote; the previews' "
+                "index.html would replace it: move it, or choose another -o"
+            )
+    return path
 
 
 def write_contact_sheet(
     entries: Sequence[SheetEntry], folder: str | Path, name: str = "index.html"
 ) -> Path:
-    """Write :func:`contact_sheet` as ``folder/name`` (replacing an older one)."""
+    """Write :func:`contact_sheet` as ``folder/name`` (replacing an older sheet,
+    never another file: :func:`check_contact_sheet`)."""
     from ..atomic import atomic_output
 
-    path = Path(folder) / name
+    path = check_contact_sheet(folder, name)
     with atomic_output(path, force=True) as fh:
         fh.write(contact_sheet(entries, folder).encode("utf-8"))
     return path
@@ -158,12 +243,17 @@ def batch_thumbnail(
 
     Called in the worker that converted the mesh, so the mesh is not read again
     (nor checked again when ``report``, made with ``examples=MAX_MARKS``, is given).
+    A file already at the thumbnail's name that is not a preview (a picture
+    beside the scans, in a batch into its input folder) is left as it is.
     """
+    thumb = thumbnail_name(output)
+    if (thumb.exists() or thumb.is_symlink()) and read_summary(thumb) is None:
+        return f"no preview: {thumb} exists and is not a preview isoconvert wrote; left as it is"
     try:
         preview = render_preview(
             mesh, size=THUMBNAIL_SIZE, checked=checked, grid=grid, report=report
         )
-        write_preview(preview, thumbnail_name(output), force=True)
+        write_preview(preview, thumb, force=True)
     except IsoconvertError as exc:
         return f"no preview: {exc}"
     return ""
