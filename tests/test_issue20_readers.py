@@ -730,3 +730,23 @@ def test_nrrd_ignored_directions_keep_their_note_but_not_the_spacing_advice(tmp_
     given = read_volume(path, spacing=(1, 2, 3)).notes
     assert not any("--spacing" in n for n in given)
     assert any(n.startswith("space directions in the NRRD header ignored") for n in given)
+
+
+def test_dicom_one_frame_with_negative_slice_thickness_takes_the_given_spacing(tmp_path):
+    pydicom = pytest.importorskip("pydicom")
+    from test_dicom_multiframe import write_enhanced
+
+    frames = zyx_field(1, 4, 6, np.int16)
+    path = write_enhanced(tmp_path / "one.dcm", frames, [(0.0, 0.0, 0.0)])
+    ds = pydicom.dcmread(path)
+    ds.SharedFunctionalGroupsSequence[0].PixelMeasuresSequence[0].SliceThickness = -1
+    ds.save_as(path)
+    vol = read_volume(path, spacing=(0.3, 0.4, 1.5))
+    assert vol.spacing.tolist() == [0.3, 0.4, 1.5]
+    assert not any("SliceThickness" in n for n in vol.notes)
+    alone = read_volume(path)
+    assert alone.spacing.tolist() == [0.25, 0.5, 1.0]
+    assert (
+        "one frame; SliceThickness -1.0 is not a positive number, so z spacing 1; set --spacing"
+        in alone.notes
+    ), alone.notes

@@ -86,6 +86,8 @@ def _shown(value) -> str:
     """A DICOM value for a note: "missing", or what it holds."""
     if value is None:
         return "missing"
+    if isinstance(value, (str, bytes, int, float)):
+        return str(value)
     try:
         return "[" + ", ".join(str(v) for v in value) + "]"
     except TypeError:
@@ -106,6 +108,27 @@ def _pixel_spacing(ds, name: str, notes: list[str]) -> np.ndarray:
         )
     )
     return np.ones(2)
+
+
+def _thickness(ds, what: str, notes: list[str]) -> float:
+    """The z spacing of a volume of one slice: its SliceThickness, or 1 when that is
+    missing or not a positive number (with a note either way, which ``--spacing``
+    removes)."""
+    value = ds.get("SliceThickness")
+    try:
+        dz = float(value)
+    except (TypeError, ValueError):
+        dz = float("nan")
+    if np.isfinite(dz) and dz > 0:
+        notes.append(spacing_note(f"{what}; z spacing {dz:g} from SliceThickness"))
+        return dz
+    notes.append(
+        spacing_note(
+            f"{what}; SliceThickness {_shown(value)} is not a positive number, so z "
+            "spacing 1; set --spacing"
+        )
+    )
+    return 1.0
 
 
 def _is_multiframe(ds) -> bool:
@@ -327,8 +350,7 @@ def _series_volume(path: Path, items: list, notes: list[str]) -> Volume:
     names = [f.name for f, _ in items]
     origin = _floats(items[0][1], "ImagePositionPatient", 3, items[0][0])
     if len(items) == 1:
-        dz = float(items[0][1].get("SliceThickness", 1) or 1)
-        notes.append(spacing_note(f"one slice; z spacing {dz:g} from SliceThickness"))
+        dz = _thickness(items[0][1], "one slice", notes)
     else:
         gaps = np.diff(pos)
         dup = np.flatnonzero(gaps <= _GAP_ATOL)
@@ -485,8 +507,7 @@ def _multiframe_volume(path: Path, f: Path, ds, notes: list[str]) -> Volume:
     pos = along[order]
     if n == 1:
         item = _group_item(per_frame[0], shared, "PixelMeasuresSequence")
-        dz = float((item if item is not None else ds).get("SliceThickness", 1) or 1)
-        notes.append(spacing_note(f"one frame; z spacing {dz:g} from SliceThickness"))
+        dz = _thickness(item if item is not None else ds, "one frame", notes)
     else:
         gaps = np.diff(pos)
         same = int(np.count_nonzero(gaps <= _GAP_ATOL))
