@@ -177,6 +177,11 @@ NO_FRAME_NOTE = (
     "every open boundary counts as a hole: the mesh records no grid, nor that a grid "
     "cut it; pass --grid VOLUME to judge them against the volume's grid"
 )
+#: ``Report.notes`` entry for a mesh with no face (or segment) to check.
+NO_FACE_NOTE = (
+    "no triangle is a face (there are none, or every one repeats a position; for "
+    "contours, every segment): there is no surface to check, so every check fails"
+)
 #: What the report says of a label mesh (``--labels --single-file``).
 LABEL_NOTE = (
     "a label mesh: watertight, manifold, oriented and no-holes are judged on each "
@@ -452,6 +457,11 @@ def check_mesh(
     )
     if len(bad):
         report.checks = {check: False for check in report.checks}
+    if report.topology["components"] == 0:
+        # no 2-cell (or segment) at all: "manifold" or "no holes" would hold only
+        # vacuously, and --require must not pass a mesh that is nothing
+        report.checks = {check: False for check in report.checks}
+        report.notes.append(NO_FACE_NOTE)
     if frame.name == "bounding box" and frame.used:
         report.notes.append(BOUNDING_BOX_NOTE)
     elif frame.name == "none" and frame.used:

@@ -20,7 +20,7 @@ from isoconvert.checks import CHECK_NAMES
 from isoconvert.cli import main
 from isoconvert.mesh import Mesh
 from isoconvert.meshfile import read_mesh
-from isoconvert.report import NO_FRAME_NOTE, check_mesh, format_report
+from isoconvert.report import NO_FACE_NOTE, NO_FRAME_NOTE, check_mesh, format_report
 from isoconvert.writers import write_mesh
 
 
@@ -239,10 +239,20 @@ def test_an_unused_non_finite_vertex_still_fails_every_check():
     assert not any(report.checks.values())
 
 
-def test_a_mesh_of_degenerate_triangles_only_is_not_watertight():
-    report = check_mesh(Mesh(POINTS, np.array([[0, 0, 0], [1, 1, 2]])))
-    assert report.counts["edges"] == 0
-    assert not report.checks["watertight"] and not report.checks["no-degenerate"]
+@pytest.mark.parametrize(
+    "cells",
+    [
+        np.zeros((0, 3), np.int64),  # no triangle at all
+        np.array([[0, 0, 0], [1, 1, 2], [0, 1, 3]]),  # every one repeats a position
+        np.array([[0, 3], [1, 1]]),  # segments, every one of zero length
+    ],
+)
+def test_a_mesh_with_no_face_passes_no_check(cells):
+    """'manifold' or 'no-holes' would hold only vacuously: --require must not pass it."""
+    report = check_mesh(Mesh(POINTS, cells))
+    assert report.topology["components"] == 0
+    assert report.failures(list(CHECK_NAMES)) == list(CHECK_NAMES)
+    assert NO_FACE_NOTE in report.notes
 
 
 def test_an_open_polyline_without_a_grid_has_holes():

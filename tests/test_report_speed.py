@@ -224,8 +224,11 @@ def reference_report(mesh: Mesh, examples: int = 5) -> dict:
         "count": len(non_finite),
         "examples": [{"vertex": i} for i in non_finite[:examples]],
     }
-    if non_finite:
+    if non_finite or not components:  # no face: nothing passes (not even vacuously)
         checks = {name: False for name in checks}
+    notes = [] if components else [report_module.NO_FACE_NOTE]
+    if frame.name != "grid" and frame.used:
+        notes.append({"bounding box": BOUNDING_BOX_NOTE, "none": NO_FRAME_NOTE}[frame.name])
     return {
         "schema": "isoconvert-report",
         "schema_version": report_module.SCHEMA_VERSION,
@@ -247,9 +250,7 @@ def reference_report(mesh: Mesh, examples: int = 5) -> dict:
             "per_component": components,
         },
         "measures": measures,
-        "notes": [{"bounding box": BOUNDING_BOX_NOTE, "none": NO_FRAME_NOTE}[frame.name]]
-        if frame.name != "grid" and frame.used
-        else [],
+        "notes": notes,
     }
 
 

@@ -62,6 +62,11 @@ class Preview:
             "frame": self.frame,
         }
 
+    def describe(self) -> str:
+        """One line of what the picture shows, as its footer says it (e.g. "holes
+        (boundary edges inside) 8; check fails watertight, no-holes")."""
+        return "; ".join(self.footer) if self.footer else "not checked"
+
     def png(self) -> bytes:
         """The image as PNG bytes, with :meth:`summary` under :data:`PNG_KEY`."""
         from PIL import Image
