@@ -13,7 +13,7 @@ from .convert import ConvertOptions, ConvertResult, read_input, refuse_outputs_r
 from .errors import IsoconvertError
 from .extract.tables import DEFAULT_AMBIGUITY
 from .grid import grid_slab_zyx
-from .post.pipeline import post_process
+from .post.pipeline import EmptyMeshError, post_process
 from .volume import Volume
 from .writers import check_attributes, output_format
 from .writers.stored import write_mesh
@@ -104,13 +104,21 @@ def convert_labels(
     outputs = label_outputs(output, surfaces.labels)
     for path in outputs:  # every name is checked before the first file is written
         check_output(path, opts.force, inputs=volume.files)
+    meshes = [surfaces[label] for label in surfaces.labels]
+    if post.steps:
+        progress("post-processing")
+        # every label before the first file: a step emptying one label's surface
+        # fails the run with no file written, not half of the files
+        for n, label in enumerate(surfaces.labels):
+            try:
+                meshes[n] = post_process(meshes[n], volume, post, ambiguity=DEFAULT_AMBIGUITY,
+                                         flip=False, nan_as=None, on_status=on_status)  # fmt: skip
+            except EmptyMeshError as exc:  # say which label's surface it was
+                text = str(exc).removeprefix(f"{volume.source}: ")
+                raise EmptyMeshError(f"{volume.source}: label {label}: {text}") from None
     results = []
-    for label, path in zip(surfaces.labels, outputs, strict=True):
-        mesh = extracted = surfaces[label]
-        if post.steps:
-            progress("post-processing")
-            mesh = post_process(mesh, volume, post, ambiguity=DEFAULT_AMBIGUITY, flip=False,
-                                nan_as=None, on_status=on_status)  # fmt: skip
+    for label, path, mesh in zip(surfaces.labels, outputs, meshes, strict=True):
+        extracted = surfaces[label]
         progress("writing")
         written = write_mesh(mesh, path, format=writer.name, ascii=opts.ascii, force=opts.force)
         results.append(

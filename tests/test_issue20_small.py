@@ -554,3 +554,21 @@ def test_contact_sheet_shows_skipped_files_apart_and_counts_as_batch(scans, tmp_
         str(scans / n) for n in ("MANIFEST.md", "make.py", "notes.txt")
     )
     assert all("not a volume format" in s for s in sheet.skipped)
+
+
+def test_labels_emptied_by_min_size_write_no_file_at_all(tmp_path, capsys):
+    """Label 1 keeps its surface, label 2's is removed: no file is written (not label 1's
+    alone), and the line names label 2."""
+    data = np.zeros((20, 20, 20), np.uint8)
+    data[2:15, 2:15, 2:15] = 1
+    data[16:19, 16:19, 16:19] = 2  # a small cube
+    path = save(tmp_path, "lab.npy", data)
+    from isoconvert import read_volume
+    from isoconvert.extract.labels import label_surfaces
+
+    small = label_surfaces(read_volume(path))[2].n_cells
+    code, _, err = run(
+        capsys, "convert", path, "-o", tmp_path / "lab.ply", "--labels", "--min-size", small + 1
+    )
+    one_line_error(code, err, f"lab.npy: label 2: --min-size {small + 1} removed the only")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lab.npy"]
