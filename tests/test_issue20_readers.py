@@ -750,3 +750,19 @@ def test_dicom_one_frame_with_negative_slice_thickness_takes_the_given_spacing(t
         "one frame; SliceThickness -1.0 is not a positive number, so z spacing 1; set --spacing"
         in alone.notes
     ), alone.notes
+
+
+def test_metaimage_non_finite_offset_can_be_set_with_origin(tmp_path):
+    path = tmp_path / "v.mha"
+    path.write_bytes(
+        b"ObjectType = Image\nNDims = 3\nDimSize = 5 3 4\nElementType = MET_UCHAR\n"
+        b"Offset = nan 0 inf\nElementDataFile = LOCAL\n" + zyx_field().tobytes()
+    )
+    vol = read_volume(path, origin=(1, 2, 3))
+    assert vol.origin.tolist() == [1, 2, 3]
+    assert not any("Offset" in n for n in vol.notes)
+    alone = read_volume(path)
+    assert alone.origin.tolist() == [0, 0, 0]
+    assert "Offset [nan, 0.0, inf] in the MetaImage header ignored; using 0; set --origin" in (
+        alone.notes
+    )

@@ -35,7 +35,13 @@ from ..grid import RawGrid, read_exactly
 from ..memory import check_fits
 from ..volume import Volume
 from .nrrd import _data_path, _Inflater, numbered_names
-from .options import ReadOptions, absolute_files, check_channel, spacing_note
+from .options import (
+    ReadOptions,
+    absolute_files,
+    check_channel,
+    origin_note,
+    spacing_note,
+)
 
 _MAX_HEADER = 1 << 20  # bytes of header before ElementDataFile (a LIST's names excluded)
 _MAX_LIST = 64 << 20  # bytes of a LIST of file names
@@ -148,6 +154,11 @@ def read_metaimage(path: Path, options: ReadOptions) -> Volume:
     notes = []
     spacing = _spacing(header, ndims, notes)
     origin = header.numbers(("Offset", "Origin", "Position"), ndims)
+    if origin is not None and not all(np.isfinite(v) for v in origin):
+        notes.append(
+            origin_note(f"Offset {origin} in the MetaImage header ignored; using 0; set --origin")
+        )
+        origin = None
     direction = _direction(header, ndims, notes)
     orientation = header.get("AnatomicalOrientation")
     if orientation and orientation.strip() and set(orientation.strip()) != {"?"}:
