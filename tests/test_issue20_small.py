@@ -572,3 +572,42 @@ def test_labels_emptied_by_min_size_write_no_file_at_all(tmp_path, capsys):
     )
     one_line_error(code, err, f"lab.npy: label 2: --min-size {small + 1} removed the only")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["lab.npy"]
+
+
+# --- a property of the suggested levels -------------------------------------------------------
+
+hypothesis = pytest.importorskip("hypothesis")
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+from hypothesis.extra.numpy import arrays  # noqa: E402
+
+_FLOATS = st.one_of(
+    st.sampled_from([np.nan, np.inf, -np.inf, 7.0, np.nextafter(7.0, 8.0), 0.0, -1e308, 1e308]),
+    st.floats(allow_nan=False, allow_infinity=False, width=64),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.one_of(
+        arrays(np.float64, st.tuples(*[st.integers(1, 4)] * 3), elements=_FLOATS),
+        arrays(np.uint8, st.tuples(*[st.integers(1, 4)] * 3)),
+        arrays(np.int16, st.tuples(*[st.integers(1, 4)] * 3), elements=st.integers(-3, 3)),
+    )
+)
+def test_suggested_levels_are_inside_the_finite_range_or_absent_with_a_reason(data):
+    """Each suggested level splits the finite samples (some >= it, some below, the
+    sign rule); there are none exactly when no level does, and then a reason."""
+    from isoconvert.stats import histogram, no_levels_reason, suggested_levels
+
+    hist = histogram(data)
+    finite = data[np.isfinite(data)] if data.dtype.kind == "f" else data.ravel()
+    levels = suggested_levels(hist)
+    if finite.size == 0 or finite.min() == finite.max():
+        assert levels == {} and no_levels_reason(hist)
+        return
+    assert (hist.low, hist.high) == (finite.min(), finite.max())
+    assert no_levels_reason(hist) is None and set(levels) == {"otsu", "p50", "p90", "p99"}
+    for value in levels.values():
+        above = finite >= value
+        assert above.any() and not above.all(), (value, hist.low, hist.high)
