@@ -931,10 +931,8 @@ def preview(
     picture = preview_file(
         mesh_file, output, size=parse_size(size), background=parse_colour(background), force=force
     )
-    if not quiet:
-        found = {k: v for k, v in (picture.marks.counts if picture.marks else {}).items() if v}
-        what = ", ".join(f"{v:,} {k.replace('_', ' ')}" for k, v in found.items()) or "no problems"
-        print(f"wrote {output}: {what} marked ({time.perf_counter() - start:.2f} s)")
+    if not quiet:  # what the picture's footer says, so as the report says
+        print(f"wrote {output}: {picture.describe()} ({time.perf_counter() - start:.2f} s)")
 
 
 def _emit_report(

@@ -264,3 +264,17 @@ def test_an_open_polyline_without_a_grid_has_holes():
     assert not report.checks["no-holes"]
     cut = check_mesh(Mesh(line.vertices, line.cells, info={"cut_by_grid": True}))
     assert cut.boundary_frame == "bounding box" and cut.checks["no-holes"]
+
+
+def test_the_preview_command_says_what_the_footer_says(renderer, tmp_path, capsys):
+    """`isoconvert preview` of an OBJ with a NaN vertex said "no problems marked"."""
+    mesh = sphere()
+    mesh.vertices[5] = np.nan
+    path = tmp_path / "nan.obj"
+    lines = [f"v {x} {y} {z}" for x, y, z in mesh.vertices]
+    lines += [f"f {a} {b} {c}" for a, b, c in mesh.cells + 1]
+    path.write_text("\n".join(lines) + "\n")
+    code, out, err = run(capsys, "preview", path, "-o", tmp_path / "nan.png", "--size", "320x240")
+    assert code == 0, err
+    assert "1 vertex is NaN/Inf: not drawn; check fails every test" in out
+    assert "no problems" not in out
