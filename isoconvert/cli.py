@@ -864,7 +864,8 @@ def check(
         str | None,
         typer.Option(
             help="The volume the mesh came from: boundary edges on its grid are not holes "
-            "(default: the grid recorded in a PLY/OBJ header, else the bounding box).",
+            "(default: the grid the file records; an isoconvert STL's bounding box; "
+            "else every open boundary is a hole).",
             rich_help_panel="Checks",
         ),
     ] = None,
