@@ -155,7 +155,6 @@ def check_complete(tif, path: Path) -> None:
             f"{path}: corrupt TIFF: its OME metadata declares {planes} planes but the file "
             f"holds {count} {_TRUNCATED}"
         )
-
     for n in range(count):
         page = pages[n]
         ends = [
