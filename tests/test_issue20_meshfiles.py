@@ -265,6 +265,18 @@ def test_a_file_shorter_than_a_binary_stl_header(tmp_path):
     refused(path, "not a binary STL (9 bytes", "nor an ASCII STL")
 
 
+def test_garbage_after_a_solid_line_says_both_readings_fail(tmp_path):
+    """'solid', then 200 bytes of no facet: neither ASCII nor (84 + 50 n bytes) binary."""
+    path = tmp_path / "solid_garbage.stl"
+    path.write_bytes(b"solid x\n" + bytes(range(1, 201)))
+    refused(
+        path,
+        "not an ASCII STL (a 'solid' line, but no 'facet' or 'vertex' lines)",
+        "nor a binary STL (80-byte header + count",
+        "the file has 208)",
+    )
+
+
 def test_an_ascii_stl_with_a_broken_vertex_line_names_it(tmp_path):
     path = tmp_path / "broken.stl"
     path.write_text(

@@ -25,6 +25,7 @@ _OURS = (b"binary STL written by isoconvert", b"solid isoconvert")
 _VERTEX = re.compile(rb"^[ \t]*vertex[ \t]+([^\r\n]*)", re.MULTILINE | re.IGNORECASE)
 _FACET = re.compile(rb"^[ \t]*facet\b", re.MULTILINE | re.IGNORECASE)
 _SOLID = re.compile(rb"\A\s*solid\b", re.IGNORECASE)
+_ENDSOLID = re.compile(rb"^[ \t]*endsolid\b", re.MULTILINE | re.IGNORECASE)
 
 
 def _read_stl(path: Path) -> Mesh:
@@ -47,20 +48,19 @@ def _read_stl(path: Path) -> Mesh:
         head = fh.read(_HEADER)
         count = int(np.frombuffer(head, "<u4", 1, 80)[0]) if len(head) == _HEADER else None
         needed = None if count is None else _HEADER + _RECORD * count
+        binary = (
+            f"not a binary STL ({size} bytes: shorter than its 84-byte header and count)"
+            if needed is None
+            else f"not a binary STL (80-byte header + count {count:,} needs {needed:,} "
+            f"bytes, the file has {size:,})"
+        )
         vertices = None
         if _SOLID.match(head) and size != needed:  # a binary header may start "solid" too
             fh.seek(0)
-            vertices = _ascii_corners(
-                path, fh.read(), binary_fits=needed is not None and size > needed
-            )
+            binary_fits = needed is not None and size > needed
+            vertices = _ascii_corners(path, fh.read(), None if binary_fits else binary)
         if vertices is None:
             if needed is None or size < needed:
-                binary = (
-                    f"not a binary STL ({size} bytes: shorter than its 84-byte header and count)"
-                    if needed is None
-                    else f"not a binary STL (80-byte header + count {count:,} needs {needed:,} "
-                    f"bytes, the file has {size:,})"
-                )
                 raise FormatError(f"{path}: {binary} nor an ASCII STL (no 'solid' line)")
             # binary; bytes after the records (some writers pad) are ignored
             records = np.frombuffer(_mapped(fh, _HEADER), _BINARY, count)
@@ -74,17 +74,25 @@ def _read_stl(path: Path) -> Mesh:
     return Mesh(_as_stored(vertices, "float32"), cells, info=info)
 
 
-def _ascii_corners(path: Path, text: bytes, binary_fits: bool) -> np.ndarray | None:
-    """(3T, 3) float64 corners of the ``vertex x y z`` lines of an ASCII STL; None
-    when there are none and the file may be a binary one (``binary_fits``)."""
+def _ascii_corners(path: Path, text: bytes, binary: str | None) -> np.ndarray | None:
+    """(3T, 3) float64 corners of the ``vertex x y z`` lines of an ASCII STL.
+
+    ``binary`` says why the file is no binary STL; None when it may be one (its
+    size holds its count's records): then a file without ``facet`` and
+    ``vertex`` lines gives None, to be read as binary."""
     tails = _VERTEX.findall(text)
     facets = len(_FACET.findall(text))
     if not tails:
-        if binary_fits and not facets:
+        if binary is None and not facets:
             return None
         if facets:
             raise FormatError(f"{path}: an ASCII STL whose facets have no 'vertex' lines")
-        raise FormatError(f"{path}: holds no triangles or segments")
+        if _ENDSOLID.search(text):  # solid ... endsolid, and nothing between
+            raise FormatError(f"{path}: holds no triangles or segments")
+        raise FormatError(
+            f"{path}: not an ASCII STL (a 'solid' line, but no 'facet' or 'vertex' lines) "
+            f"nor a binary STL ({binary.removeprefix('not a binary STL (')}"
+        )
     values = _numbers(b" ".join(tails))
     if values is None or len(values) != 3 * len(tails):
         number = next(i for i, t in enumerate(tails) if (v := _numbers(t)) is None or len(v) != 3)
