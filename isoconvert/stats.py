@@ -137,7 +137,7 @@ class Histogram:
         return float(self.centers[min(b, len(self.counts) - 1)])
 
 
-def histogram(data: np.ndarray) -> Histogram:
+def histogram(data: np.ndarray, nan_as: float | None = None) -> Histogram:
     """Histogram of the finite samples of ``data``.
 
     One bin per value for integers with a range of at most 65536 values (and
@@ -147,12 +147,17 @@ def histogram(data: np.ndarray) -> Histogram:
     Parameters
     ----------
     data : (X, Y[, Z]) array of real numbers
+    nan_as : float or None
+        Count NaN/Inf samples as this value, as extraction with ``--nan-as``
+        sees them (``--level auto``); None leaves them out (``nonfinite``).
 
     Returns
     -------
     Histogram
     """
     rng = value_range(data)
+    if nan_as is not None and rng.nonfinite:
+        return _histogram_nan_as(data, rng, float(nan_as))
     if not np.isfinite(rng.min):
         # no finite sample: no bins (a range such as 0 .. 1 would be made up)
         return Histogram(np.array([math.nan]), np.zeros(0, np.int64), False, rng.nonfinite)
@@ -177,6 +182,21 @@ def histogram(data: np.ndarray) -> Histogram:
         # explicit edges: numpy searches them (no (hi - lo) scaling that could overflow)
         counts += np.histogram(values, bins=edges)[0]
     return Histogram(edges, counts, False, rng.nonfinite, float(lo), float(hi))
+
+
+def _histogram_nan_as(data: np.ndarray, rng, nan_as: float) -> Histogram:
+    """:func:`histogram` of float ``data`` whose NaN/Inf samples count as ``nan_as``."""
+    if not math.isfinite(nan_as):
+        raise LevelError(f"--nan-as takes a finite value, got {nan_as}")
+    nan_as = float(data.dtype.type(nan_as))  # as extraction casts it
+    lo = nan_as if not np.isfinite(rng.min) else min(rng.min, nan_as)
+    hi = nan_as if not np.isfinite(rng.max) else max(rng.max, nan_as)
+    edges = equal_bins(lo, hi, _FLOAT_BINS)
+    counts = np.zeros(_FLOAT_BINS, dtype=np.int64)
+    for slab in slabs(data):
+        values = np.where(np.isfinite(slab), slab, slab.dtype.type(nan_as))
+        counts += np.histogram(values, bins=edges)[0]
+    return Histogram(edges, counts, False, 0, float(lo), float(hi))
 
 
 def _value(v: float) -> str:

@@ -177,7 +177,7 @@ def extract(
     if stray:
         raise IsoconvertError(f"{name} has no option {', '.join(sorted(stray))}")
     if isinstance(level, str):
-        level = resolve_level(volume, level, on_status)
+        level = resolve_level(volume, level, on_status, nan_as)
     blocks = blocks or Blocks()
     block_wise = extractor.prepared and name in BLOCK_METHODS
     if blocks.asked and not block_wise:
@@ -239,14 +239,20 @@ def _check_result(name: str, mesh: object) -> None:
     mesh.cells = np.asarray(mesh.cells, dtype=np.int64)
 
 
-def resolve_level(volume: Volume, level: str, on_status: Callable[[str], None] | None) -> float:
-    """A number from the text of a level: a float, or "auto" (Otsu)."""
+def resolve_level(
+    volume: Volume,
+    level: str,
+    on_status: Callable[[str], None] | None,
+    nan_as: float | None = None,
+) -> float:
+    """A number from the text of a level: a float, or "auto" (Otsu, of the samples
+    as extraction sees them: NaN/Inf as ``nan_as`` when given)."""
     from ..errors import LevelError
     from ..stats import histogram, otsu_level
 
     if level.strip().lower() == "auto":
         try:
-            value = otsu_level(histogram(volume.samples))
+            value = otsu_level(histogram(volume.samples, nan_as))
         except LevelError as exc:  # no level gives a surface: say so, invent none
             raise LevelError(f"{volume.source}: --level auto: {exc}") from None
         if on_status:
