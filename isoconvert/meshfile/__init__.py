@@ -1,11 +1,16 @@
 """Reading mesh files (PLY, OBJ, OFF, STL, VTP, GLB, 3MF) for ``isoconvert check``.
 
-PLY, OBJ, OFF, VTP, GLB and 3MF are read here, with the standard library and
-numpy only (VTK and trimesh are test extras, never needed at run time), so
-that vertices and cells come back exactly as the file holds them (the file's
-vertex indices, nothing merged, reordered or dropped) and so that a header's
-grid record and a bad vertex index can be told; STL, which has no indices, is
-read by trimesh.
+Every format is read here, with the standard library and numpy only (VTK and
+trimesh are test extras, never needed at run time), so that vertices and cells
+come back exactly as the file holds them (the file's vertex indices, nothing
+merged, reordered or dropped), so that a header's grid record and a bad vertex
+index can be told, and so that a broken file is named for what is wrong with it.
+
+Nothing is allocated or inflated past what the file can back: compressed VTP
+blocks no further than their header declares, 3MF parts no further than their
+ZIP entry declares and never more than 100 times their compressed size (above
+16 MiB), counts in PLY, OFF, STL and GLB headers checked against the file's
+size first. A decompression bomb is a one-line FormatError.
 """
 
 from __future__ import annotations
@@ -27,7 +32,7 @@ __all__ = ["MESH_SUFFIXES", "read_mesh"]
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl", ".vtp", ".glb", ".3mf")
 
-#: The reader of each suffix but ".stl" (trimesh's, whose errors _read_stl words itself).
+#: The reader of each suffix but ".stl" (whose errors _read_stl words itself).
 _READERS = {
     ".ply": _read_ply,
     ".obj": _read_obj,
@@ -44,9 +49,9 @@ def read_mesh(path: str | Path) -> Mesh:
     Vertices and cells come back as the file holds them: PLY, OBJ, OFF, VTP,
     GLB and 3MF with the file's vertex order and indices (polygons split into
     fans of triangles; several VTP pieces, glTF primitives or 3MF objects one
-    after the other, placed by their node or build transforms), STL with three
-    vertices per triangle (trimesh, ``process=False``); the report merges
-    equal positions itself and says how many it merged.
+    after the other, placed by their node or build transforms), STL (binary,
+    or ASCII) with three vertices per triangle; the report merges equal
+    positions itself and says how many it merged.
 
     Parameters
     ----------
@@ -64,7 +69,10 @@ def read_mesh(path: str | Path) -> Mesh:
         value) and, when the file records a well-formed grid as isoconvert's
         writers do (PLY/OBJ/OFF header comment, VTP comment or ``isoconvert``
         field array, GLB ``asset.extras``, 3MF ``isoconvert:grid`` metadata),
-        ``grid``.
+        ``grid``; ``cut_by_grid`` True when isoconvert wrote the file (its
+        header, comments, extras, metadata or STL header say so), so that
+        without a grid record the report may judge boundaries against the
+        bounding box (:func:`isoconvert.check_mesh`).
 
     Raises
     ------
