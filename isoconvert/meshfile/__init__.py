@@ -32,8 +32,9 @@ __all__ = ["MESH_SUFFIXES", "read_mesh"]
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl", ".vtp", ".glb", ".3mf")
 
-#: The reader of each suffix but ".stl" (whose errors _read_stl words itself).
+#: The reader of each suffix.
 _READERS = {
+    ".stl": _read_stl,
     ".ply": _read_ply,
     ".obj": _read_obj,
     ".off": _read_off,
@@ -94,8 +95,6 @@ def read_mesh(path: str | Path) -> Mesh:
         )
     if path.stat().st_size == 0:
         raise FormatError(f"{path}: the file is empty (0 bytes); nothing to check")
-    if suffix == ".stl":
-        return _read_stl(path)
     reader = _READERS[suffix]
     try:
         return reader(path)
