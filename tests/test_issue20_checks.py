@@ -174,8 +174,9 @@ def test_a_sound_preview_says_all_pass(renderer):
     assert render_preview(mesh, size=(400, 300)).summary()["footer"] == [ALL_PASS]
 
 
-def test_the_preview_of_an_open_box_marks_its_holes(renderer, tmp_path):
-    path = tmp_path / "box.ply"
+@pytest.mark.parametrize("suffix", ["ply", "stl"])
+def test_the_preview_of_an_open_box_marks_its_holes(renderer, tmp_path, suffix):
+    path = tmp_path / f"box.{suffix}"
     open_box().export(path)
     preview = preview_file(path, tmp_path / "box.png", size=(400, 300))
     assert preview.marks.counts["boundary_edges_inside"] == 8
