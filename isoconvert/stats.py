@@ -200,7 +200,10 @@ def _histogram_nan_as(data: np.ndarray, rng, nan_as: float) -> Histogram:
 
 
 def _value(v: float) -> str:
-    """A sample value for a message: as short as ``:g``, exact to 10 digits."""
+    """A sample value for a message: whole numbers in full (int64 samples near
+    2**62 too), others as short as ``:g`` allows to 10 digits."""
+    if float(v).is_integer() and abs(v) < 1e21:
+        return str(int(v))
     return f"{v:.10g}"
 
 

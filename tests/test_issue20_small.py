@@ -616,3 +616,12 @@ def test_suggested_levels_are_inside_the_finite_range_or_absent_with_a_reason(da
     for value in levels.values():
         above = finite >= value
         assert above.any() and not above.all(), (value, hist.low, hist.high)
+
+
+def test_a_constant_int64_volume_names_its_value_in_full(tmp_path, capsys):
+    value = 2**62 + 2**40  # a float64 holds it exactly; 10 digits would not show it
+    path = save(tmp_path, "big.npy", np.full((3, 3, 3), value, np.int64))
+    code, out, _ = run(capsys, "info", path, "--json")
+    assert json.loads(out)["no_levels_reason"] == (
+        f"all samples are {value}: no isosurface at any level"
+    )
