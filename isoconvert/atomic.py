@@ -13,6 +13,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import BinaryIO
 
+from . import signals
 from .errors import OutputError
 
 
@@ -73,15 +74,19 @@ def check_output(
         raise OutputError(f"{path}: already exists; pass --force to overwrite it")
     # permissions do not tell everything (root, read-only mounts, /proc): the
     # temporary file the output is written to must be creatable there
+    signals.defer()  # a signal is held until the probe is gone again
     try:
-        handle, probe = tempfile.mkstemp(dir=folder, prefix=".isoconvert-probe-")
-    except OSError as exc:
-        raise OutputError(
-            f"{path}: cannot create files in the folder {folder} ({exc.strerror}); "
-            "choose another output"
-        ) from None
-    os.close(handle)
-    os.unlink(probe)
+        try:
+            handle, probe = tempfile.mkstemp(dir=folder, prefix=".isoconvert-probe-")
+        except OSError as exc:
+            raise OutputError(
+                f"{path}: cannot create files in the folder {folder} ({exc.strerror}); "
+                "choose another output"
+            ) from None
+        os.close(handle)
+        os.unlink(probe)
+    finally:
+        signals.resume()
     return path
 
 
@@ -215,12 +220,17 @@ def atomic_output(
     # the temporary name always fits the folder's limit, however long the user's is
     keep = _name_max(Path(folder)) - len(".") - len(".XXXXXXXX.part") - 8
     stem = os.fsencode(path.name)[: max(keep, 1)].decode("utf-8", "ignore") or "out"
+    # a signal between making the file and entering the block that removes it
+    # would leave it behind: it is held until then (isoconvert.signals)
+    signals.defer()
     try:
         fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{stem}.", suffix=".part")
     except OSError as exc:
+        signals.resume()
         raise OutputError(f"{path}: cannot create a file there ({exc.strerror})") from None
     try:
         with os.fdopen(fd, "w+b") as fh:
+            signals.resume()
             yield fh
             if stream is not None:
                 fh.seek(0)

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import mmap
 import os
+from pathlib import Path
 
-from .errors import VolumeError
+from .errors import OutputError, VolumeError
 
 
 def available_memory() -> int | None:
@@ -40,4 +43,81 @@ class FileMap(mmap.mmap):
     Its pages are the file's: giving them back (``madvise(MADV_DONTNEED)``, see
     :func:`isoconvert.writers.chunks.row_chunks`) loses nothing, whereas on an
     anonymous map it would erase them. Only maps of this type are released.
+
+    Make one with :meth:`create` and grow it with :meth:`grow`: both give the
+    file its disk blocks first (:func:`reserve_disk`), so that no write through
+    the map can meet a full disk (which the kernel answers with SIGBUS).
     """
+
+    @classmethod
+    def create(cls, fd: int, size: int, folder: str | Path, why: str = "") -> FileMap:
+        """Map the first ``size`` bytes of the empty file ``fd`` (in ``folder``),
+        once they are on disk; ``why`` is for :func:`reserve_disk`'s message."""
+        reserve_disk(fd, size, folder, why)
+        mapped = cls(fd, size)
+        mapped.fd, mapped.folder, mapped.why = fd, folder, why
+        return mapped
+
+    def grow(self, size: int) -> None:
+        """Make the map (and its file) ``size`` bytes long, disk blocks first."""
+        reserve_disk(self.fd, size, self.folder, self.why)
+        self.resize(size)
+
+
+def reserve_disk(fd: int, size: int, folder: str | Path, why: str = "") -> None:
+    """Give the file ``fd`` real disk blocks for its first ``size`` bytes.
+
+    A file extended by ``truncate`` is sparse: its blocks are found only when
+    a page is written, and a write through a memory map that finds none kills
+    the process with SIGBUS (no exception, no message, whatever the handlers).
+    Reserving them first turns a full disk into an error here, before any map
+    uses them. Uses ``posix_fallocate``; where the file system does not do it,
+    writes zeros.
+
+    Parameters
+    ----------
+    fd : int
+        An open, writable regular file, at most ``size`` bytes long.
+    size : int
+        Bytes it must hold.
+    folder : str or Path
+        Where it is (it may have no name), for the message.
+    why : str
+        What it holds, for the message.
+
+    Raises
+    ------
+    DiskFullError
+        No room for it (``disk full at FOLDER (needs N MiB, M MiB free)``).
+    OutputError
+        Another write error.
+    """
+    from .atomic import DISK_FULL_ERRNOS, disk_full_error
+
+    have = os.fstat(fd).st_size
+    if size <= have:
+        return
+    try:
+        try:
+            os.posix_fallocate(fd, have, size - have)
+        except OSError as exc:
+            if exc.errno not in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS):
+                raise
+            _write_zeros(fd, have, size)
+    except OSError as exc:
+        with contextlib.suppress(OSError):  # give back what was reserved: the caller stops
+            os.ftruncate(fd, have)
+        if exc.errno in DISK_FULL_ERRNOS:
+            raise disk_full_error(folder, size - have, why=why) from None
+        raise OutputError(f"{folder}: writing a temporary file failed ({exc.strerror})") from None
+
+
+def _write_zeros(fd: int, start: int, stop: int) -> None:
+    """Write zeros into bytes ``start .. stop - 1`` of the file ``fd``."""
+    step = 1 << 20
+    zeros = bytes(step)
+    for at in range(start, stop, step):
+        n = min(step, stop - at)
+        done = 0
+        while done < n:
+            done += os.pwrite(fd, zeros[: n - done], at + done)

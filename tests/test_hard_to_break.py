@@ -145,7 +145,7 @@ def test_full_disk_leaves_nothing(tmp_path, capsys, monkeypatch):
     code = main(
         ["convert", str(SAMPLES / "sphere.nrrd"), "-l", "127.5", "-o", str(tmp_path / "s.ply")]
     )
-    one_line_error(capsys, code, "s.ply", "disk is full")
+    one_line_error(capsys, code, "s.ply", "disk full at")
     assert list(tmp_path.iterdir()) == []
 
 

@@ -21,6 +21,7 @@ either case.
 
 from __future__ import annotations
 
+import contextlib
 import mmap
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
@@ -30,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import DiskFullError, disk_full_error
 from ..errors import IsoconvertError
 from ..grid import LazyGrid, SlabReader, grid_slab_zyx
 from ..memory import FileMap
@@ -351,6 +353,13 @@ def _block_kernel(job: BlockJob):
     return SquaresBlock(axis=job.axis, ambiguity=job.ambiguity, **common)
 
 
+#: What a spill file's disk-full message says it was for, and what else helps.
+_SPILL_WHY = (
+    "for the mesh being built, larger than a quarter of --max-memory (a larger one keeps "
+    "more of it in memory)"
+)
+
+
 class _Growing:
     """An array that grows along its first axis without copying what it holds.
 
@@ -378,9 +387,15 @@ class _Growing:
         """Room for ``rows`` more rows after the committed ones."""
         need = (self.size + rows) * self.row
         if need > len(self._map):
-            self._map.resize(max(need, 2 * len(self._map)))
-            if self._file is None and hasattr(mmap, "MADV_HUGEPAGE"):
-                self._map.madvise(mmap.MADV_HUGEPAGE)
+            if self._file is None:
+                self._map.resize(max(need, 2 * len(self._map)))
+                if hasattr(mmap, "MADV_HUGEPAGE"):
+                    self._map.madvise(mmap.MADV_HUGEPAGE)
+                return
+            try:  # on disk: its blocks first (FileMap.grow), and no more than fits
+                self._map.grow(max(need, 2 * len(self._map)))
+            except DiskFullError:
+                self._map.grow(need)
 
     def spill(self, folder: Path) -> None:
         """Move the array into a temporary file in ``folder``; from now on its
@@ -389,8 +404,11 @@ class _Growing:
             return
         fh = tempfile.TemporaryFile(dir=folder, prefix=".isoconvert-mesh-")
         size = len(self._map)
-        fh.truncate(size)
-        mapped = FileMap(fh.fileno(), size)
+        try:
+            mapped = FileMap.create(fh.fileno(), size, folder, _SPILL_WHY)
+        except BaseException:
+            fh.close()
+            raise
         step = 1 << 24
         for a in range(0, size, step):  # piece by piece: no copy of the whole
             mapped[a : a + step] = self._map[a : a + step]
@@ -421,8 +439,17 @@ class _Growing:
         self._map = self._file = None  # the view keeps both open
         return out
 
+    def wanted(self, rows: int) -> int:
+        """Bytes of the map once it has room for ``rows`` more rows."""
+        return max(len(self._map), (self.size + rows) * self.row)
+
     def close(self) -> None:
         """Drop the memory (and the file) of an array that will not be finished."""
+        if self._map is not None:
+            with contextlib.suppress(BufferError, ValueError):  # views left: they keep it
+                self._map.close()
+        if self._file is not None:
+            self._file.close()
         self._map = self._file = None
 
 
@@ -460,16 +487,23 @@ class MeshSink:
         """Arrays for a slab's kernel, after what is committed; valid until the
         next call (see :class:`_Growing`)."""
         sizes = (n_vertices, n_vertices, n_cells)
-        for part, n in zip(self._parts, sizes, strict=True):
-            part.reserve(n)
-        if (
-            not self.spilled
-            and self._spill_dir is not None
-            and sum(part.nbytes for part in self._parts) > (self._spill_above or 0)
-        ):
-            for part in self._parts:
-                part.spill(self._spill_dir)
-            self.spilled = True
+        try:
+            for part, n in zip(self._parts, sizes, strict=True):
+                part.reserve(n)
+            if (
+                not self.spilled
+                and self._spill_dir is not None
+                and sum(part.nbytes for part in self._parts) > (self._spill_above or 0)
+            ):
+                for part in self._parts:
+                    part.spill(self._spill_dir)
+                self.spilled = True
+        except DiskFullError:
+            # say what the spilled mesh needs in all, against what is free once
+            # its files are given back
+            wanted = sum(part.wanted(n) for part, n in zip(self._parts, sizes, strict=True))
+            self.close()
+            raise disk_full_error(self._spill_dir, wanted, more=True, why=_SPILL_WHY) from None
         return tuple(
             part.view(part.size, part.size + n) for part, n in zip(self._parts, sizes, strict=True)
         )
