@@ -25,6 +25,7 @@ from .errors import InputNotFoundError, IsoconvertError, OutputError
 from .quiet import silence_third_party
 from .readers import READERS, format_suffix, is_dicom_file, unsupported_format
 from .readers.stacks import TIFF_SUFFIXES, is_zarr_store, natural_key
+from .signals import run_in_worker, stop_workers_on_interrupt, worker_init
 
 #: Bytes of working memory a conversion needs per byte of samples (a native-order
 #: or NaN-free copy at most, vertex and triangle arrays, the writer's records),
@@ -980,6 +981,9 @@ def run_jobs(
     Output sub-folders are created as jobs start; those left empty by failed
     jobs are removed (with worker processes, by this process, once no running
     job writes there). Worker processes run :func:`silence_third_party` first.
+    They stop with this process (:func:`isoconvert.signals.worker_init`): on
+    KeyboardInterrupt or SIGTERM/SIGHUP here they are terminated, removing their
+    partial files, and a worker whose parent died stops by itself.
 
     With ``settings.scheduler`` set, the jobs run on that Dask cluster instead
     (:func:`isoconvert.distributed.run_on_cluster`; ``workers`` and
@@ -1027,9 +1031,15 @@ def run_jobs(
             running: dict = {}
             used = 0
             try:
-                with ProcessPoolExecutor(
-                    max_workers=workers, mp_context=context, initializer=silence_third_party
-                ) as pool:
+                with (
+                    ProcessPoolExecutor(
+                        max_workers=workers,
+                        mp_context=context,
+                        initializer=worker_init,
+                        initargs=(silence_third_party,),
+                    ) as pool,
+                    stop_workers_on_interrupt(pool),  # not wait for their jobs to finish
+                ):
                     while pending or running:
                         while pending and len(running) < workers:
                             job = pending[0]
@@ -1041,7 +1051,10 @@ def run_jobs(
                             except IsoconvertError as exc:
                                 done(Outcome(job.name, job.output, "failed", message=str(exc)))
                                 continue
-                            running[pool.submit(_run_one_dict, asdict(job), settings)] = job
+                            future = pool.submit(
+                                run_in_worker, _run_one_dict, asdict(job), settings
+                            )
+                            running[future] = job
                             used += job.estimate
                         if not running:
                             continue
@@ -1081,10 +1094,17 @@ def run_jobs(
 def _run_alone(job: Job, settings: BatchSettings, context) -> Outcome:
     """Run one job in a worker of its own; a worker that dies fails only this job."""
     try:
-        with ProcessPoolExecutor(
-            max_workers=1, mp_context=context, initializer=silence_third_party
-        ) as pool:
-            return Outcome(**pool.submit(_run_one_dict, asdict(job), settings).result())
+        with (
+            ProcessPoolExecutor(
+                max_workers=1,
+                mp_context=context,
+                initializer=worker_init,
+                initargs=(silence_third_party,),
+            ) as pool,
+            stop_workers_on_interrupt(pool),
+        ):
+            future = pool.submit(run_in_worker, _run_one_dict, asdict(job), settings)
+            return Outcome(**future.result())
     except BrokenProcessPool:
         return Outcome(
             job.name,

@@ -1593,7 +1593,7 @@ def _interrupted() -> int:
     from . import signals
 
     signum = signals.received()
-    by = f" ({signals.signal_name(signum)})" if signum else ""
+    by = f" ({signals.signal_name(signum)})" if signum and signum != signal.SIGINT else ""
     with contextlib.suppress(OSError, ValueError):  # SIGHUP: the terminal may be gone
         print(f"isoconvert: interrupted{by}; no partial output was left", file=sys.stderr)
     return 128 + (signum or signal.SIGINT)

@@ -3,7 +3,7 @@
 ``timeout``, ``kill``, a CI cancellation and ``docker stop`` send SIGTERM; a
 closed terminal sends SIGHUP. Python's default for both is to die on the
 spot, which leaves a half-written output file behind. :func:`handled` makes
-them raise :class:`Interrupted` instead (a KeyboardInterrupt, so every
+them (and SIGINT) raise :class:`Interrupted` instead (a KeyboardInterrupt, so every
 ``except KeyboardInterrupt`` and ``finally`` on the way up runs, and
 :func:`isoconvert.atomic.atomic_output` removes its temporary file); the CLI
 then says so in one line and exits with 128 + the signal number, as a shell
@@ -45,7 +45,7 @@ WORKER_GRACE = 10.0
 
 
 class Interrupted(KeyboardInterrupt):
-    """A run stopped by a signal (SIGTERM, SIGHUP; SIGINT raises a plain KeyboardInterrupt).
+    """A run stopped by a signal (SIGINT, SIGTERM, SIGHUP).
 
     Attributes
     ----------
@@ -73,49 +73,80 @@ def signal_name(signum: int) -> str:
 
 #: The first stopping signal this process received, and when.
 _received: tuple[int, float] | None = None
+#: Depth of :func:`defer` in the main thread, and the signal held meanwhile.
+_deferring = 0
+_pending: int | None = None
 #: Whether a batch worker is running a job (see :func:`run_in_worker`).
 _busy = False
 
 
 def received() -> int | None:
-    """The number of the first SIGTERM or SIGHUP :func:`handled` caught, or None."""
+    """The number of the first signal :func:`handled` caught (SIGINT, SIGTERM,
+    SIGHUP), or None."""
     return _received[0] if _received else None
 
 
 def _stop(signum: int, frame: Any) -> None:
-    global _received
+    global _received, _pending
     now = time.monotonic()
-    if _received is not None and now - _received[1] < REPEAT_GRACE:
-        return  # already stopping: let the cleanup finish
+    if signum != signal.SIGINT and _received is not None and now - _received[1] < REPEAT_GRACE:
+        return  # already stopping: let the cleanup finish (a Ctrl-C still counts)
     if _received is None:
         _received = (signum, now)
+    if _deferring:
+        _pending = signum
+        return
     raise Interrupted(signum)
 
 
 @contextlib.contextmanager
 def handled() -> Iterator[None]:
-    """While inside, SIGTERM and SIGHUP raise :class:`Interrupted` in the main
-    thread; the handlers before are put back on leaving.
+    """While inside, SIGINT, SIGTERM and SIGHUP raise :class:`Interrupted` (a
+    KeyboardInterrupt) in the main thread, except in a :func:`defer` window;
+    the handlers before are put back on leaving.
 
-    A signal the process was started ignoring (``nohup`` ignores SIGHUP) stays
-    ignored. Outside the main thread this does nothing (Python runs handlers
-    only there).
+    A signal the process was started ignoring (``nohup`` ignores SIGHUP, a
+    shell's background job SIGINT) stays ignored, and so does a SIGINT handler
+    someone else installed. Outside the main thread this does nothing (Python
+    runs handlers only there).
     """
-    global _received
-    _received = None
+    global _received, _pending
+    _received = _pending = None
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     before = {}
     for sig in STOP_SIGNALS:
-        if signal.getsignal(sig) is signal.SIG_IGN:
-            continue
-        before[sig] = signal.signal(sig, _stop)
+        if signal.getsignal(sig) is not signal.SIG_IGN:
+            before[sig] = signal.signal(sig, _stop)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        before[signal.SIGINT] = signal.signal(signal.SIGINT, _stop)
     try:
         yield
     finally:
         for sig, handler in before.items():
             signal.signal(sig, handler)
+
+
+def defer() -> None:
+    """Hold a stopping signal until :func:`resume`: for the few steps between
+    making a temporary file and entering the block that removes it again (a
+    signal there would leave it behind). Pairs nest; other threads than the
+    main one are not concerned (no signal is raised in them)."""
+    global _deferring
+    if threading.current_thread() is threading.main_thread():
+        _deferring += 1
+
+
+def resume() -> None:
+    """End a :func:`defer`; raise :class:`Interrupted` now if a signal came meanwhile."""
+    global _deferring, _pending
+    if threading.current_thread() is not threading.main_thread() or not _deferring:
+        return
+    _deferring -= 1
+    if not _deferring and _pending is not None:
+        signum, _pending = _pending, None
+        raise Interrupted(signum)
 
 
 # --- batch worker processes -------------------------------------------------------------------
@@ -176,13 +207,16 @@ def _watch_parent(parent_pid: int) -> None:
 
 
 def _worker_stop(signum: int, frame: Any) -> None:
-    global _received
+    global _received, _pending
     if _received is not None:
         return  # already stopping
     _received = (signum, time.monotonic())
-    if _busy:
-        raise Interrupted(signum)
-    os._exit(128 + signum)
+    if not _busy:
+        os._exit(128 + signum)
+    if _deferring:
+        _pending = signum
+        return
+    raise Interrupted(signum)
 
 
 def run_in_worker(function: Callable[..., Any], *args: Any) -> Any:
@@ -240,8 +274,10 @@ def stop_workers(pool: Any, grace: float = WORKER_GRACE) -> None:
 __all__ = [
     "STOP_SIGNALS",
     "Interrupted",
+    "defer",
     "handled",
     "received",
+    "resume",
     "run_in_worker",
     "signal_name",
     "stop_workers",
