@@ -99,6 +99,24 @@ def _mhd_numbered(folder: Path) -> tuple[Path, list[Path]]:
     return header, [header, *parts]
 
 
+def _mha(folder: Path) -> tuple[Path, list[Path]]:
+    path = folder / "vol.mha"
+    header = (
+        "ObjectType = Image\nNDims = 3\nDimSize = 12 12 12\nElementType = MET_UCHAR\n"
+        "ElementSpacing = 1 1 1\nElementDataFile = LOCAL\n"
+    )
+    path.write_bytes(header.encode() + field_zyx().tobytes())
+    return path, [path]
+
+
+def _png(folder: Path) -> tuple[Path, list[Path]]:
+    from PIL import Image
+
+    path = folder / "slice.png"
+    Image.fromarray(field_zyx()[6]).save(path)
+    return path, [path]
+
+
 def _tiff_file(folder: Path) -> tuple[Path, list[Path]]:
     path = folder / "stack.tif"
     tifffile.imwrite(path, field_zyx())
@@ -149,6 +167,8 @@ INPUTS = {
     "raw": _raw,
     "metaimage": _mhd,
     "metaimage-numbered": _mhd_numbered,
+    "metaimage-local": _mha,
+    "image": _png,
     "tiff-file": _tiff_file,
     "tiff-folder": _tiff_folder,
     "npy": _npy,
