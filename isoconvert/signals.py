@@ -171,18 +171,25 @@ def worker_init(initializer: Callable[[], None] | None = None) -> None:
     """
     import multiprocessing
 
-    parent = multiprocessing.parent_process()
-    parent_pid = parent.pid if parent is not None and parent.pid else os.getppid()
     for sig in STOP_SIGNALS:
         signal.signal(sig, _worker_stop)
     if hasattr(signal, "SIGINT"):
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent_pid = os.getppid()
     if not _die_with_parent():
         threading.Thread(
             target=_watch_parent, args=(parent_pid,), name="isoconvert-parent", daemon=True
         ).start()
-    if os.getppid() != parent_pid:  # the parent died before the above took hold
-        os._exit(128 + signal.SIGTERM)
+    # the process that started this one (spawn: the parent) may have died before
+    # the above took hold; a forkserver parent differs from it and is alive
+    starter = multiprocessing.parent_process()
+    if starter is not None and starter.pid and starter.pid != os.getppid():
+        try:
+            os.kill(starter.pid, 0)
+        except ProcessLookupError:
+            os._exit(128 + signal.SIGTERM)
+        except OSError:
+            pass
     if initializer is not None:
         initializer()
 
