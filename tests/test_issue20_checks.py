@@ -279,3 +279,34 @@ def test_the_preview_command_says_what_the_footer_says(renderer, tmp_path, capsy
     assert code == 0, err
     assert "1 vertex is NaN/Inf: not drawn; check fails every test" in out
     assert "no problems" not in out
+
+
+def test_contact_sheet_card_says_what_check_says_of_a_nan_mesh(tmp_path):
+    """A thumbnail with nothing to mark (the NaN vertex is not drawn) still
+    records the failed checks: the batch sheet's card must show them, in red."""
+    pytest.importorskip("vtk")
+    import html as html_module
+    import re
+
+    from isoconvert.mesh import Mesh
+    from isoconvert.preview import SheetEntry, contact_sheet, render_preview, write_preview
+    from isoconvert.preview.sheet import thumbnail_name
+    from isoconvert.report import check_mesh
+
+    sphere = trimesh.creation.icosphere(2)
+    vertices = sphere.vertices.copy()
+    vertices[5] = np.nan
+    mesh = Mesh(vertices, sphere.faces.astype(np.int64))
+    checks = check_mesh(mesh).checks
+    assert not any(checks.values())  # what check says: every test fails
+    out = tmp_path / "nan.ply"
+    out.write_bytes(b"")  # the card links the mesh file
+    picture = render_preview(mesh, size=(200, 150))
+    assert not any(picture.marks.counts.values())  # nothing drawn to mark
+    write_preview(picture, thumbnail_name(out))
+    page = contact_sheet([SheetEntry(str(tmp_path / "nan.nrrd"), str(out), "ok")], tmp_path)
+    (card,) = re.findall(r'<figure class="([a-z]+)"', page)
+    text = html_module.unescape(page)
+    assert "no problems found" not in text
+    assert "NaN" in text and "check fails" in text
+    assert card == "bad", page

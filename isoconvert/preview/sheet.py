@@ -138,10 +138,16 @@ def contact_sheet(entries: Sequence[SheetEntry], folder: str | Path) -> str:
             picture = '<div class="none">no preview</div>'
         problems = (summary or {}).get("problems") or {}
         found = [f"{PROBLEMS[k][0]} {v:,}" for k, v in problems.items() if v and k in PROBLEMS]
+        # what the picture's own footer says, which is what check says (NaN vertices,
+        # failed checks with nothing to mark: misorientation, an empty mesh)
+        recorded = summary or {}
+        failing = bool(recorded.get("failed_checks") or recorded.get("non_finite_vertices"))
         if e.status not in ("ok", "check-failed"):
             report = ""
         elif summary is None:
             report = "not checked"
+        elif summary.get("footer"):
+            report = "; ".join(summary["footer"])
         else:
             report = "; ".join(found) if found else "no problems found"
         status = e.status + (f": {e.message}" if e.message and e.status != "ok" else "")
@@ -153,7 +159,7 @@ def contact_sheet(entries: Sequence[SheetEntry], folder: str | Path) -> str:
             "" if e.vertices is None else f"{e.vertices:,} vertices, {e.cells or 0:,} triangles",
             f"report: {html.escape(report)}" if report else "",
         ]
-        if e.status in BAD_STATUSES or found:
+        if e.status in BAD_STATUSES or found or failing:
             klass = "bad"
         else:
             klass = "skipped" if e.status == "skipped" else "good"
