@@ -172,6 +172,7 @@ void label_presence(const T *f, i64 n, int threads, Presence &out) {
 // axes, s < t: the numbering of the Python reference's pairing rule.
 struct Tables {
   int face_lo[12], face_hi[12];
+  int mid2[12][3];  // twice face f's centre, relative to the dual cell's centre: -1, 0, 1
   int gap_face[6][4];
   int ring[6][4];
 };
@@ -192,6 +193,7 @@ Tables make_tables() {
         const int f = face_of(a, off);
         t.face_lo[f] = sample(off);
         t.face_hi[f] = sample(off) + (1 << a);
+        for (int k = 0; k < 3; ++k) t.mid2[f][k] = k == a ? 0 : 2 * off[k] - 1;
       }
     }
   }
@@ -227,8 +229,10 @@ const Tables kT = make_tables();
 // The quads around one dual cell, grouped in sheets (one vertex each).
 struct Cell {
   i32 x;
-  u16 kept;       // bit f: face f is a quad
-  u16 modes;      // 2 bits per ring: 0 one group, 1 or 2 paired (see group())
+  u16 kept : 12;  // bit f: face f is a quad
+  u16 pinched : 4;  // sheets where a label sees two of its own fans (see make_cell)
+  u16 modes : 12;  // 2 bits per ring: 0 one group, 1 or 2 paired (see group())
+  u16 pinched_out : 4;  // ... where the background or a label not extracted is
   u64 sheet_of;   // 4 bits per face: its sheet
   u32 nbcount;    // 4 bits per sheet: stencil entries (before the junction filter)
   u8 nsheets;
@@ -259,7 +263,9 @@ bool make_cell(const T v[8], const bool w[8], unsigned flips, Cell &c) {
   }
   if (!kept) return false;
   c.kept = u16(kept);
+  c.pinched = 0;
   c.modes = 0;
+  c.pinched_out = 0;
   c.paired_up = c.both_up = 0;
   int parent[12];
   for (int f = 0; f < 12; ++f) parent[f] = f;
@@ -343,6 +349,55 @@ bool make_cell(const T v[8], const bool w[8], unsigned flips, Cell &c) {
     }
   }
   c.nbcount = nbcount;
+  // A label whose own faces in one sheet fall into two fans (its faces joined
+  // only through another label's) is pinched at that vertex: when that other
+  // label's fan holds faces of both, no split keeps both surfaces closed with
+  // one vertex per quad corner. Counted, so the note can say so (rare). The
+  // background's surface (judged in a --single-file mesh) is counted apart.
+  unsigned pinched = 0, pinched_out = 0, done = 0;
+  for (int o = 0; o < 8; ++o) {
+    if ((done >> o) & 1) continue;
+    unsigned mine = 0;
+    for (int p = o; p < 8; ++p) mine |= unsigned(v[p] == v[o]) << p;
+    done |= mine;
+    unsigned faces = 0;
+    for (int f = 0; f < 12; ++f) {
+      if (((kept >> f) & 1) && (((mine >> kT.face_lo[f]) ^ (mine >> kT.face_hi[f])) & 1)) {
+        faces |= 1u << f;
+      }
+    }
+    if (iso::popcount(u64(faces)) < 2) continue;
+    for (int f = 0; f < 12; ++f) parent[f] = f;
+    for (int d = 0; d < 6; ++d) {  // this label's faces that share a group of a ring
+      const int mode = c.mode(d);
+      int head[2] = {-1, -1};
+      for (int g = 0; g < 4; ++g) {
+        const int f = kT.gap_face[d][g];
+        if (!((faces >> f) & 1)) continue;
+        const int k = group(mode, g);
+        if (head[k] < 0) {
+          head[k] = f;
+        } else {
+          unite(head[k], f);
+        }
+      }
+    }
+    int root_of_sheet[12];
+    unsigned twice = 0;
+    for (int s = 0; s < ns; ++s) root_of_sheet[s] = -1;
+    for (int f = 0; f < 12; ++f) {
+      if (!((faces >> f) & 1)) continue;
+      const int s = c.sheet(f), r = find(f);
+      if (root_of_sheet[s] < 0) {
+        root_of_sheet[s] = r;
+      } else if (root_of_sheet[s] != r) {
+        twice |= 1u << s;
+      }
+    }
+    (w[o] ? pinched : pinched_out) += unsigned(iso::popcount(u64(twice)));
+  }
+  c.pinched = u16(std::min(pinched, 15u));
+  c.pinched_out = u16(std::min(pinched_out, 15u));
   return true;
 }
 
@@ -395,6 +450,14 @@ struct NetOptions {
   int threads;
 };
 
+// How far split copies start from their dual cell's centre, as a fraction of
+// the way to the mean of their faces' centres (at most 0.71 voxel away): small,
+// so the unsmoothed surface stays the voxel faces but at these corners (each copy
+// moves at most 0.011 voxel and changes the volume by less than 0.05 voxel: it is
+// linear in one vertex, a third of its triangles' area vectors, 12 faces at most),
+// large enough to survive float32 coordinates up to ~10^4 voxels.
+constexpr double kSplitStep = 1.0 / 64.0;
+
 struct NetResult {
   Vec<double> positions;  // (V, 3)
   Vec<i64> dual_cells;    // (V,)
@@ -402,6 +465,8 @@ struct NetResult {
   Vec<i64> pairs;         // (2Q, 2): inside, outside of each triangle
   Vec<i32> sides;         // (Q, 2): wanted-label index of inside, outside (-1)
   i64 split = 0;
+  i64 unresolved = 0;  // places where a label's surface is still not manifold
+  i64 outside = 0;     // ... where the background's is (see make_cell)
 };
 
 template <class T>
@@ -452,14 +517,19 @@ class Net {
     resolve_flips();
     // provisional vertex and stencil numbering: chunk by chunk, cells in sweep order
     i64 nv = 0, ne = 0;
+    std::vector<const Cell *> split_cells;  // cells of two or more vertices (few)
     for (auto &ch : chunks_) {
       for (auto &c : ch.cells) {
         c.first = nv;
         c.nbfirst = ne;
         nv += c.nsheets;
         for (int s = 0; s < c.nsheets; ++s) ne += (c.nbcount >> (4 * s)) & 15;
+        if (c.nsheets > 1) split_cells.push_back(&c);
+        out.unresolved += c.pinched;
+        out.outside += c.pinched_out;
       }
     }
+    unsplit_rings(out);
     const i64 nq = quad_offsets();
     Vec<i64> corners(static_cast<size_t>(4 * nq));
     Vec<u8> flip(static_cast<size_t>(nq));
@@ -476,7 +546,16 @@ class Net {
       }
     });
     nboff[size_t(nv)] = ne;
-    Vec<double> pos = smooth(cell_of, junction, nb, nboff);
+    Vec<double> pos = smooth(cell_of, junction, nb, nboff, split_cells);
+    // copies that still coincide (none seen in tests): the note counts them
+    for (const Cell *c : split_cells) {
+      for (int s = 1; s < c->nsheets; ++s) {
+        for (int t = 0; t < s; ++t) {
+          const double *a = &pos[size_t(3 * (c->first + s))], *b = &pos[size_t(3 * (c->first + t))];
+          out.unresolved += a[0] == b[0] && a[1] == b[1] && a[2] == b[2];
+        }
+      }
+    }
     // Final numbering: vertices in the order their first quad corner comes.
     std::vector<i64> rank(size_t(nv), -1);
     i64 next = 0;
@@ -678,6 +757,39 @@ class Net {
     }
   }
 
+  // Paired rings whose two copies still end on the same two vertices at both
+  // ends, where a label sees all four quads: its surface has an edge in four
+  // triangles there (a label touching itself along the edge, joined to itself at
+  // both ends through another label's faces; see make_cell's pinched count).
+  // Where only the background or a label not extracted sees all four: outside.
+  void unsplit_rings(NetResult &out) {
+    for (const auto &ch : chunks_) {
+      for (const auto &g : ch.rings) {
+        const i64 x = g[0], y = g[1], z = g[2];
+        const int b = int(g[3]), d = 2 * b + 1;
+        const Cell *lo = find(x, y, z);
+        const Cell *hi = find(x + (b == 0), y + (b == 1), z + (b == 2));
+        const int mode = lo->mode(d);
+        if (mode == 0) continue;
+        const int g0 = gap_of_group(mode, 0), g1 = gap_of_group(mode, 1);
+        if (lo->sheet(kT.gap_face[d][g0]) != lo->sheet(kT.gap_face[d][g1]) ||
+            hi->sheet(kT.gap_face[d - 1][g0]) != hi->sheet(kT.gap_face[d - 1][g1])) {
+          continue;
+        }
+        T v[8];
+        bool w[8];
+        block(x, y, z, v, w);
+        const int *q = kT.ring[d];
+        const bool diag_a = v[q[0]] == v[q[2]], diag_b = v[q[1]] == v[q[3]];
+        if ((diag_a && w[q[0]]) || (diag_b && w[q[1]])) {
+          ++out.unresolved;
+        } else {
+          ++out.outside;
+        }
+      }
+    }
+  }
+
   template <class Flipped>
   void redo(i64 x, i64 y, i64 z, const Flipped &is_flipped) {
     Cell *c = find(x, y, z);
@@ -833,7 +945,7 @@ class Net {
   // Constrained relaxation (Jacobi): see labels.py. Junction vertices follow
   // junction neighbours only and stay put where junction curves meet.
   Vec<double> smooth(const Vec<i64> &cell_of, const Vec<u8> &junction, Vec<i64> &nb,
-                     const Vec<i64> &nboff) {
+                     const Vec<i64> &nboff, const std::vector<const Cell *> &split_cells) {
     const i64 nv = i64(cell_of.size());
     const i64 cx = X_ + 1, cy = Y_ + 1;
     Vec<double> pos(static_cast<size_t>(3 * nv)), centers(size_t(3 * nv));
@@ -846,6 +958,24 @@ class Net {
         }
       }
     });
+    // The copies of a split vertex start kSplitStep of the way from the centre
+    // to the mean of their own faces' centres (where naive Surface Nets would put
+    // them): towards their own side, so that they differ in position, not only in
+    // index, and the surface does not touch itself there even unsmoothed.
+    for (const Cell *c : split_cells) {
+      int sum[12][3] = {}, count[12] = {};
+      for (int f = 0; f < 12; ++f) {
+        if (!((c->kept >> f) & 1)) continue;
+        const int s = c->sheet(f);
+        ++count[s];
+        for (int k = 0; k < 3; ++k) sum[s][k] += kT.mid2[f][k];
+      }
+      for (int s = 0; s < c->nsheets; ++s) {
+        for (int k = 0; k < 3; ++k) {
+          pos[size_t(3 * (c->first + s) + k)] += kSplitStep * double(sum[s][k]) / double(2 * count[s]);
+        }
+      }
+    }
     if (o_.iterations == 0 || nb.empty()) return pos;
     std::vector<i32> degree(size_t(nv), 0);  // 0: the vertex stays put
     iso::parallel_for(nv, o_.threads, 1 << 15, [&](int, i64 b, i64 e) {
@@ -1061,12 +1191,12 @@ void bind_label_type(nb::module_ &m) {
         }
         return nb::make_tuple(give(std::move(r.positions), 3), give(std::move(r.dual_cells)),
                               give(std::move(r.corners), 4), give(std::move(r.pairs), 2),
-                              give(std::move(r.sides), 2), r.split);
+                              give(std::move(r.sides), 2), r.split, r.unresolved, r.outside);
       },
       "f"_a.noconvert(), "wanted"_a, "background"_a, "vmin"_a, "vmax"_a, "iterations"_a,
       "relaxation"_a, "constraint"_a, "reverse"_a, "threads"_a,
       "The surface net of a (Z, Y, X) label volume: (positions (V, 3) in index units, "
-      "dual_cells (V,), corners (Q, 4), pairs (2Q, 2), sides (Q, 2) int32, split).");
+      "dual_cells (V,), corners (Q, 4), pairs (2Q, 2), sides (Q, 2) int32, split, unresolved, outside).");
 }
 
 }  // namespace

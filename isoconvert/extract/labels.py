@@ -18,9 +18,9 @@ Non-manifold configurations
 Where one label touches itself only along an edge (two samples diagonal in a
 2x2 block, the others of other labels), four quads meet on one dual edge; where
 it touches itself only at a corner, two cones of quads meet at one dual vertex.
-As in VTK 9.7, such vertices are split into copies (coincident until smoothed),
-one per sheet of surface, so that every label's surface is a closed 2-manifold
-and smoothing can pull the sheets apart:
+As in VTK 9.7, such vertices are split into copies, one per sheet of surface,
+so that every label's surface is a closed 2-manifold and smoothing can pull the
+sheets apart:
 
 - around a dual edge with four quads (its ring of four samples alternates)
   the quads are paired into two copies of the edge, each pair wrapping around
@@ -35,8 +35,24 @@ and smoothing can pull the sheets apart:
   connected; each connected group gets its own vertex.
 
 The combined mesh therefore has one vertex per dual cell except at those
-configurations. A label whose pieces touch only at a corner where three or more
-other labels also meet can still be pinched at that vertex (not resolved).
+configurations. The copies of a split vertex start 1/64 of the way from the dual
+cell's centre to the mean of the centres of their own faces (where naive Surface
+Nets would put them), i.e. a little into their own side: they differ in position,
+not only in index, so the surface does not touch itself there and the report,
+which judges positions, finds it manifold at every smoothing setting. Unsmoothed,
+the surface is the voxel faces but at those copies; each moves at most 0.011
+voxel, changing the enclosed volume by less than 0.05 voxel.
+
+Not every configuration can be resolved while two labels share their boundary
+exactly (one vertex per quad corner, used by both labels): where a label touches
+itself along an edge or at a corner and another extracted label touches both
+pieces there, that label's fan around the vertex holds faces of both pieces, so
+they cannot get separate copies, and the label stays pinched (a vertex with two
+fans, or an edge in four of its triangles). ``LabelMeshes.unresolved`` counts
+these places (the kernel finds them per 2x2x2 block, and per dual edge whose two
+copies still end on the same vertices), ``unresolved_outside`` the same for the
+background's surface (judged in a ``--single-file`` mesh's report), and the note
+says so instead of "kept manifold". In a volume of one label both are 0.
 
 Smoothing
 ---------
@@ -143,6 +159,13 @@ class LabelMeshes:
         non-manifold configurations share their dual cell.
     split_vertices : int
         How many vertices were added by splitting non-manifold configurations.
+    unresolved : int
+        Places where a label's surface is still not manifold (0 in a volume of
+        one label; see the module notes): a vertex where it is pinched, or an
+        edge in four of its triangles.
+    unresolved_outside : int
+        The same for the surface of the background (and of labels not
+        extracted), which only a ``--single-file`` mesh's report judges.
     """
 
     meshes: dict[int, Mesh]
@@ -152,6 +175,8 @@ class LabelMeshes:
     face_map: dict[int, np.ndarray] = field(default_factory=dict)
     dual_cells: np.ndarray | None = None
     split_vertices: int = 0
+    unresolved: int = 0
+    unresolved_outside: int = 0
 
     @property
     def labels(self) -> list[int]:
@@ -191,7 +216,8 @@ def label_surfaces(
         Smoothing options, a number of iterations (other options default), or
         None for the defaults (16 iterations). 0 gives the blocky surface.
     on_status : callable or None
-        Receives one-line notices (non-manifold configurations split).
+        Receives one-line notices (non-manifold configurations split, and where
+        a label could not be kept manifold).
 
     Returns
     -------
@@ -216,7 +242,7 @@ def label_surfaces(
 
     # a left-handed index-to-world map mirrors the surface: the kernel writes every quad reversed
     reverse = reversed_orientation(volume, False)
-    positions, dual_cells, corners, pairs, sides, split = _native.label_net(
+    positions, dual_cells, corners, pairs, sides, split, unresolved, outside = _native.label_net(
         samples,
         wanted,
         float(background),
@@ -230,11 +256,8 @@ def label_surfaces(
     )
     if len(corners) == 0:
         raise LevelError(f"{volume.source}: no label surface (every sample is background)")
-    if split and on_status:
-        on_status(
-            f"note: labels: {split} vertices split where a label touches itself only along "
-            "an edge or at a corner (kept manifold)"
-        )
+    if (split or unresolved or outside) and on_status:
+        on_status(_split_note(int(split), int(unresolved), int(outside)))
     vertices = volume.index_to_world(positions)
     cells, faces, face_offsets, used, used_offsets, local, label_vertices = _native.label_meshes(
         corners, vertices, sides, len(wanted), threads
@@ -248,7 +271,15 @@ def label_surfaces(
         "constraint": options.constraint,
     }
     combined = Mesh(vertices, cells, None, info)
-    result = LabelMeshes({}, combined, pairs, dual_cells=dual_cells, split_vertices=int(split))
+    result = LabelMeshes(
+        {},
+        combined,
+        pairs,
+        dual_cells=dual_cells,
+        split_vertices=int(split),
+        unresolved=int(unresolved),
+        unresolved_outside=int(outside),
+    )
     for index, label in enumerate(wanted.tolist()):
         f0, f1 = face_offsets[index], face_offsets[index + 1]
         v0, v1 = used_offsets[index], used_offsets[index + 1]
@@ -372,6 +403,28 @@ def _wanted_labels(
             f"{source}: label {shown} not in the volume; labels present: {some or 'none'}"
         )
     return wanted, len(wanted) == int(np.count_nonzero(present != background))
+
+
+def _split_note(split: int, unresolved: int, outside: int) -> str:
+    """The note on the vertices split: kept manifold, or where and why not."""
+    text = (
+        f"note: labels: {split} vertices split where labels touch only along an edge or at a corner"
+    )
+    if not unresolved and not outside:
+        return text + " (kept manifold)"
+    why = []
+    if unresolved:
+        why.append(
+            f"at {unresolved} places a label touches itself where another label touches "
+            "both pieces, so its surface stays pinched there (no split keeps both surfaces "
+            "closed and their boundary shared)"
+        )
+    if outside:
+        why.append(
+            "the background's surface, which a --single-file mesh's report judges too, "
+            f"stays pinched at {outside} places between labels"
+        )
+    return f"{text}; {'; '.join(why)}" if split else f"note: labels: {'; '.join(why)}"
 
 
 def _level_text(wanted: np.ndarray) -> str:
