@@ -396,3 +396,31 @@ def test_a_signal_just_after_the_temporary_file_is_made_leaves_nothing(tmp_path,
             fh.write(b"never")
     assert caught.value.signum == signal.SIGTERM and caught.value.exit_code == 143
     assert list(tmp_path.iterdir()) == []
+
+
+def test_handlers_keep_nohup_and_hold_a_repeated_signal_during_cleanup():
+    """A SIGHUP ignored at start (``nohup``) stays ignored; a second SIGTERM
+    while the first one's cleanup runs does not cut that cleanup short; the
+    handlers before are put back afterwards."""
+    from isoconvert import signals
+
+    before_hup = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    before_term = signal.getsignal(signal.SIGTERM)
+    cleaned = False
+    try:
+        with signals.handled():
+            assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+            os.kill(os.getpid(), signal.SIGHUP)  # ignored: nothing raised
+            with pytest.raises(signals.Interrupted):
+                try:
+                    os.kill(os.getpid(), signal.SIGTERM)
+                    time.sleep(1)  # the handler raises here
+                finally:
+                    os.kill(os.getpid(), signal.SIGTERM)  # held: the cleanup goes on
+                    time.sleep(0.05)
+                    cleaned = True
+            assert signals.received() == signal.SIGTERM
+        assert signal.getsignal(signal.SIGTERM) is before_term
+    finally:
+        signal.signal(signal.SIGHUP, before_hup)
+    assert cleaned
