@@ -62,6 +62,13 @@ def convert_labels(
     opts = (options or ConvertOptions()).updated(labels=tuple(labels), **changes)
     progress = on_progress or (lambda stage: None)
     writer = output_format(output, opts.format)
+    if opts.method is not None:
+        # there is no label path through Marching Cubes or tetrahedra: saying
+        # nothing would give Surface Nets under another method's name
+        raise IsoconvertError(
+            f"--method {opts.method} extracts an isosurface; label surfaces are always "
+            "Surface Nets: leave out --method, or --labels for an isosurface with --level"
+        )
     if opts.normals or opts.values is not None:
         raise IsoconvertError(
             "--normals and --values sample an isosurface's volume; label surfaces have "

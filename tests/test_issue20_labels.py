@@ -305,3 +305,16 @@ def test_cli_smooth_0_passes_its_own_check(make, tmp_path, capsys):
     single = tmp_path / "single.ply"
     args = ["convert", str(source), "--labels", "--single-file", "--smooth", "0", "-o"]
     assert main([*args, str(single), "--require", "watertight,manifold,oriented"]) == 0
+
+
+@pytest.mark.parametrize("method", ["cubes", "tetra"])
+def test_labels_have_no_marching_cubes_path_and_say_so(method, tmp_path, capsys):
+    # --method used to be ignored with --labels: Surface Nets under another name
+    source = tmp_path / "labels.npy"
+    np.save(source, corner_within())
+    out = tmp_path / "out.ply"
+    args = ["convert", str(source), "--labels", "--method", method, "-o", str(out)]
+    assert main(args) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Surface Nets" in err and "--method" in err
+    assert list(tmp_path.iterdir()) == [source]

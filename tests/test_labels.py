@@ -61,7 +61,10 @@ def test_cochlea_blocky_encloses_exactly_the_voxels(cochlea):
     # the voxels, and the step changes the volume by < 0.05 voxel per copy
     split, centred = split_and_centred(result, 255, cochlea)
     assert centred.signed_volume() == pytest.approx(voxels * np.prod(cochlea.spacing), abs=1e-6)
-    assert 0 < split.sum() and abs(mesh.signed_volume() - voxels) < 0.05 * split.sum()
+    voxel = np.prod(cochlea.spacing)
+    assert (
+        0 < split.sum() and abs(mesh.signed_volume() - voxels * voxel) < 0.05 * voxel * split.sum()
+    )
     assert closed_by_index(mesh.cells)
     assert check_mesh(mesh).checks["manifold"]  # the copies differ in position too
     # the other vertices at dual-cell centres: half-integers in index units
