@@ -228,12 +228,14 @@ def atomic_output(
     except OSError as exc:
         signals.resume()
         raise OutputError(f"{path}: cannot create a file there ({exc.strerror})") from None
+    copying = False  # to the stream: a full disk there is the stream's, not the folder's
     try:
         with os.fdopen(fd, "w+b") as fh:
             signals.resume()
             yield fh
             if stream is not None:
                 fh.seek(0)
+                copying = True
                 _copy_to_stream(fh, stream)
         if stream is None:
             # mkstemp makes the file private (0600); give it the permissions a plain open would
@@ -250,6 +252,9 @@ def atomic_output(
         _remove(tmp)
         if exc.errno in DISK_FULL_ERRNOS:
             # what was written when the disk filled is a lower bound of the need
+            if stream is not None and not copying:  # the temporary copy of a stream's output
+                why = f"for the output to {path} (set TMPDIR to a folder with room)"
+                raise disk_full_error(folder, written, more=True, why=why) from None
             raise disk_full_error(path, written, more=True) from None
         if exc.errno == errno.EPIPE:
             raise OutputError(f"{path}: the reading end of the pipe closed early") from None

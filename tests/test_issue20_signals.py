@@ -424,3 +424,19 @@ def test_handlers_keep_nohup_and_hold_a_repeated_signal_during_cleanup():
     finally:
         signal.signal(signal.SIGHUP, before_hup)
     assert cleaned
+
+
+def test_full_temporary_folder_of_a_stream_output_names_that_folder(
+    small_disk, mid_volume, capsys, monkeypatch
+):
+    """-o /dev/null is made in the temporary folder first: when that fills, the
+    one line names the folder (and TMPDIR), not the stream, and leaves nothing."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(small_disk))
+    code = main(["convert", str(mid_volume), "-o", "/dev/null", "--format", "ply", "-l", "0.1"])
+    err = capsys.readouterr().err
+    assert code == 1, err
+    found = disk_full_line(err, small_disk)
+    assert "TMPDIR" in err and "/dev/null" in err, found
+    assert list(small_disk.iterdir()) == []
