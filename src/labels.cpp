@@ -360,6 +360,7 @@ bool make_cell(const T v[8], const bool w[8], unsigned flips, Cell &c) {
     unsigned mine = 0;
     for (int p = o; p < 8; ++p) mine |= unsigned(v[p] == v[o]) << p;
     done |= mine;
+    if (!(mine & (mine - 1))) continue;  // one sample: its faces are one cone
     unsigned faces = 0;
     for (int f = 0; f < 12; ++f) {
       if (((kept >> f) & 1) && (((mine >> kT.face_lo[f]) ^ (mine >> kT.face_hi[f])) & 1)) {
@@ -469,15 +470,12 @@ struct NetResult {
   i64 outside = 0;     // ... where the background's is (see make_cell)
 };
 
-template <class T>
-class Net {
- public:
-  Net(const T *f, i64 nz, i64 ny, i64 nx, T background, const LabelIndex &index,
-      const NetOptions &o)
-      : f_(f), X_(nx), Y_(ny), Z_(nz), bg_(background), index_(index), o_(o) {
-    // every block of two values a (sample 0's) and b: bits 0-7 the samples equal
-    // to a, 8 a wanted, 9 b wanted, 10 a < b
-    two_.resize(2048);
+// The cells of every block of two values a (sample 0's) and b, by pattern: bits
+// 0-7 the samples equal to a, 8 a wanted, 9 b wanted, 10 a < b. Built once (the
+// sheets depend on nothing else), not per extraction.
+const std::vector<Cell> &two_value_cells() {
+  static const std::vector<Cell> table = [] {
+    std::vector<Cell> two(2048);
     for (unsigned k = 1; k < 2048; k += 2) {
       int v[8];
       bool w[8];
@@ -489,9 +487,20 @@ class Net {
       }
       Cell c{};
       if (!make_cell(v, w, 0, c)) c.nsheets = 0;
-      two_[k] = c;
+      two[k] = c;
     }
-  }
+    return two;
+  }();
+  return table;
+}
+
+template <class T>
+class Net {
+ public:
+  Net(const T *f, i64 nz, i64 ny, i64 nx, T background, const LabelIndex &index,
+      const NetOptions &o)
+      : f_(f), X_(nx), Y_(ny), Z_(nz), bg_(background), index_(index), o_(o),
+        two_(two_value_cells()) {}
 
   void run(NetResult &out) {
     const i64 cols = (X_ + 1) * (Y_ + 1);
@@ -942,6 +951,30 @@ class Net {
     }
   }
 
+  // The copies of a split vertex start kSplitStep of the way from the centre
+  // to the mean of their own faces' centres (where naive Surface Nets would put
+  // them): towards their own side, so that they differ in position, not only in
+  // index, and the surface does not touch itself there even unsmoothed. Out of
+  // line: kept apart from the relaxation loops, which it must not slow down.
+  [[gnu::noinline]] static void step_split_copies(const std::vector<const Cell *> &split_cells,
+                                                  Vec<double> &pos) {
+    for (const Cell *c : split_cells) {
+      int sum[12][3] = {}, count[12] = {};
+      for (int f = 0; f < 12; ++f) {
+        if (!((c->kept >> f) & 1)) continue;
+        const int s = c->sheet(f);
+        ++count[s];
+        for (int k = 0; k < 3; ++k) sum[s][k] += kT.mid2[f][k];
+      }
+      for (int s = 0; s < c->nsheets; ++s) {
+        for (int k = 0; k < 3; ++k) {
+          pos[size_t(3 * (c->first + s) + k)] +=
+              kSplitStep * double(sum[s][k]) / double(2 * count[s]);
+        }
+      }
+    }
+  }
+
   // Constrained relaxation (Jacobi): see labels.py. Junction vertices follow
   // junction neighbours only and stay put where junction curves meet.
   Vec<double> smooth(const Vec<i64> &cell_of, const Vec<u8> &junction, Vec<i64> &nb,
@@ -958,24 +991,7 @@ class Net {
         }
       }
     });
-    // The copies of a split vertex start kSplitStep of the way from the centre
-    // to the mean of their own faces' centres (where naive Surface Nets would put
-    // them): towards their own side, so that they differ in position, not only in
-    // index, and the surface does not touch itself there even unsmoothed.
-    for (const Cell *c : split_cells) {
-      int sum[12][3] = {}, count[12] = {};
-      for (int f = 0; f < 12; ++f) {
-        if (!((c->kept >> f) & 1)) continue;
-        const int s = c->sheet(f);
-        ++count[s];
-        for (int k = 0; k < 3; ++k) sum[s][k] += kT.mid2[f][k];
-      }
-      for (int s = 0; s < c->nsheets; ++s) {
-        for (int k = 0; k < 3; ++k) {
-          pos[size_t(3 * (c->first + s) + k)] += kSplitStep * double(sum[s][k]) / double(2 * count[s]);
-        }
-      }
-    }
+    step_split_copies(split_cells, pos);
     if (o_.iterations == 0 || nb.empty()) return pos;
     std::vector<i32> degree(size_t(nv), 0);  // 0: the vertex stays put
     iso::parallel_for(nv, o_.threads, 1 << 15, [&](int, i64 b, i64 e) {
@@ -989,26 +1005,33 @@ class Net {
       }
     });
     Vec<double> next(pos);
-    const double r = o_.relaxation, k_ = o_.constraint;
+    const double relax = o_.relaxation, half = o_.constraint;
     for (int it = 0; it < o_.iterations; ++it) {
-      iso::parallel_for(nv, o_.threads, 1 << 14, [&](int, i64 b, i64 e) {
+      // plain pointers and scalars copied into the loop: a store to `to` may not
+      // alias them, so nothing is reloaded per vertex
+      const double *from_pos = pos.data(), *centre = centers.data();
+      double *to = next.data();
+      const i32 *deg = degree.data();
+      const i64 *off = nboff.data(), *nbr = nb.data();
+      iso::parallel_for(nv, o_.threads, 1 << 14, [=](int, i64 b, i64 e) {
+        const double r = relax, k_ = half;
         for (i64 p = b; p < e; ++p) {
-          const i32 n = degree[size_t(p)];
-          if (n == 0) continue;  // at its centre: the clip leaves it there
-          const i64 from = nboff[size_t(p)];
+          const i32 n = deg[p];
+          if (n == 0) continue;  // stays at its start, in both buffers
+          const i64 from = off[p];
           double t[3] = {0.0, 0.0, 0.0};
           for (i64 k = from; k < from + n; ++k) {
-            const double *q = &pos[size_t(3 * nb[size_t(k)])];
+            const double *q = from_pos + 3 * nbr[k];
             t[0] += q[0];
             t[1] += q[1];
             t[2] += q[2];
           }
           const double d = double(n);
           for (int a = 0; a < 3; ++a) {
-            const double x = pos[size_t(3 * p + a)];
+            const double x = from_pos[3 * p + a];
             const double moved = x + r * (t[a] / d - x);
-            const double c = centers[size_t(3 * p + a)];
-            next[size_t(3 * p + a)] = std::min(std::max(moved, c - k_), c + k_);
+            const double c = centre[3 * p + a];
+            to[3 * p + a] = std::min(std::max(moved, c - k_), c + k_);
           }
         }
       });
@@ -1025,7 +1048,7 @@ class Net {
   NetOptions o_;
   std::vector<Chunk> chunks_;
   std::vector<Row> rows_;
-  std::vector<Cell> two_;
+  const std::vector<Cell> &two_;
 };
 
 // Triangles of the quads (cut along the shorter diagonal, 0-2 on ties) and
