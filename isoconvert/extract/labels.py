@@ -77,7 +77,8 @@ replaced, bit for bit and in the same order (quads in ``np.nonzero`` order per
 axis: interior faces, low side, high side; vertices by their first quad corner),
 whatever the number of threads; except that an axis of a single sample now has
 its high side's quads facing out of the labels as they should (the numpy
-version took both sides of such an axis for low sides).
+version took both sides of such an axis for low sides), and that split copies
+start off their dual cell's centre (see above).
 """
 
 from __future__ import annotations
