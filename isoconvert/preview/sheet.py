@@ -140,8 +140,11 @@ def contact_sheet(entries: Sequence[SheetEntry], folder: str | Path) -> str:
         found = [f"{PROBLEMS[k][0]} {v:,}" for k, v in problems.items() if v and k in PROBLEMS]
         # what the picture's own footer says, which is what check says (NaN vertices,
         # failed checks with nothing to mark: misorientation, an empty mesh)
+        # (a surface the grid cuts open fails only watertight: its boundary is no hole,
+        # and the card says so without a red frame)
         recorded = summary or {}
-        failing = bool(recorded.get("failed_checks") or recorded.get("non_finite_vertices"))
+        broken = [c for c in recorded.get("failed_checks") or () if c != "watertight"]
+        failing = bool(broken or recorded.get("non_finite_vertices"))
         if e.status not in ("ok", "check-failed"):
             report = ""
         elif summary is None:
