@@ -262,7 +262,7 @@ def assert_honest(result: LabelMeshes, notes: list[str], data: np.ndarray, smoot
     assert_shared(result)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     data=arrays(np.uint8, (4, 4, 4), elements=st.integers(0, 1)),
     smoothing=st.sampled_from([0, 10]),
@@ -276,7 +276,7 @@ def test_random_binary_grids_are_always_manifold(data, smoothing):
     assert all(closed_by_check(result[label]) for label in result.labels)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     data=arrays(np.uint8, (4, 4, 4), elements=st.integers(0, 2)),
     smoothing=st.sampled_from([0, 10]),
