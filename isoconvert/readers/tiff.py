@@ -189,16 +189,24 @@ def _check_next_page(tif, path: Path, size: int, count: int) -> None:
         )
 
 
-def _ome_planes(tif) -> int | None:
-    """The planes (pages) the OME metadata of ``tif`` declares, or None when it has none
-    or spreads its images over several files (TiffData naming a file)."""
+def _ome_root(tif):
+    """The parsed OME-XML of ``tif`` (an ElementTree element), or None when it has
+    none or it does not parse."""
     if not tif.is_ome or not tif.ome_metadata:
         return None
     import xml.etree.ElementTree as ET
 
     try:
-        root = ET.fromstring(tif.ome_metadata)
+        return ET.fromstring(tif.ome_metadata)
     except ET.ParseError:
+        return None
+
+
+def _ome_planes(tif) -> int | None:
+    """The planes (pages) the OME metadata of ``tif`` declares, or None when it has none
+    or spreads its images over several files (TiffData naming a file)."""
+    root = _ome_root(tif)
+    if root is None:
         return None
     if any(el.tag.endswith("UUID") and el.get("FileName") for el in root.iter()):
         return None
@@ -541,13 +549,8 @@ def _resolution_spacing(page, notes: list[str]) -> tuple[float, float] | None:
 
 def _ome_spacing(tif, ndim: int, notes: list[str]):
     """Spacing and unit from the OME Pixels element; None when it lacks an axis."""
-    if not tif.is_ome or not tif.ome_metadata:
-        return None
-    import xml.etree.ElementTree as ET
-
-    try:
-        root = ET.fromstring(tif.ome_metadata)
-    except ET.ParseError:
+    root = _ome_root(tif)
+    if root is None:
         return None
     pixels = next((el for el in root.iter() if el.tag.endswith("Pixels")), None)
     if pixels is None:
