@@ -196,6 +196,13 @@ def output_stream(path: str | Path) -> int | str | None:
     return None
 
 
+def refuse_stream(path: str | Path, why: str) -> None:
+    """Raise OutputError when ``path`` is a stream (:func:`output_stream`) but
+    several files would be named after it: ``why`` says which."""
+    if output_stream(path) is not None:
+        raise OutputError(f"{path}: a stream takes one output, but {why}; give a file name instead")
+
+
 @contextlib.contextmanager
 def atomic_output(
     path: str | Path,

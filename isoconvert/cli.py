@@ -642,6 +642,10 @@ def convert(
         reports = level_outputs(report, level)
         for path in reports:
             check_output(path, force, "report.json")  # a bad report name must not cost a mesh
+    elif report not in (None, "-") and not single_file and len(wanted or ()) != 1:
+        from .atomic import refuse_stream
+
+        refuse_stream(report, "--labels writes a report per label")
     if preview is not None:  # before the work: no renderer or a bad name must not cost a mesh
         from .preview import check_picture_output, require_renderer
 

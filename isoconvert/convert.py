@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import check_output, output_stream, refuse_inputs
+from .atomic import check_output, output_stream, refuse_inputs, refuse_stream
 from .attributes import check_3d, vertex_normals, vertex_values
 from .errors import IsoconvertError, OutputError
 from .extract import default_method, extract
@@ -222,11 +222,12 @@ def level_outputs(output: str | Path, levels: Sequence[float | str]) -> list[Pat
     Raises
     ------
     OutputError
-        The same level twice.
+        The same level twice, or ``output`` is a stream (``/dev/stdout``).
     """
     output = Path(output)
     if len(levels) == 1:
         return [output]
+    refuse_stream(output, "several --level write one file each")
     texts = [f"{level:g}" if not isinstance(level, str) else level.strip() for level in levels]
     if len(set(texts)) < len(texts):
         raise OutputError(f"--level {' '.join(texts)}: a level is given twice")

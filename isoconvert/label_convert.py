@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import check_output, refuse_inputs
+from .atomic import check_output, refuse_inputs, refuse_stream
 from .convert import ConvertOptions, ConvertResult, read_input, refuse_outputs_read
 from .errors import IsoconvertError
 from .extract.tables import DEFAULT_AMBIGUITY
@@ -20,8 +20,10 @@ from .writers.stored import write_mesh
 
 
 def label_outputs(output: str | Path, labels: Sequence[int]) -> list[Path]:
-    """Where each label's surface goes: ``NAME_labelL.SUFFIX`` beside ``output``."""
+    """Where each label's surface goes: ``NAME_labelL.SUFFIX`` beside ``output``
+    (refused for a stream such as ``/dev/stdout``: ``--single-file`` writes one)."""
     output = Path(output)
+    refuse_stream(output, "--labels writes one file per label (--single-file writes one)")
     return [output.with_name(f"{output.stem}_label{label}{output.suffix}") for label in labels]
 
 

@@ -426,3 +426,24 @@ def test_a_file_inside_a_zarr_store_is_an_input(tmp_path, capsys):
         )
         assert_one_line_error(code, err, str(target), str(store))
     assert {f: digest(f) for f in files} == before
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["-l", "127.5", "-l", "130"], ["--labels"]],
+    ids=["two levels", "labels"],
+)
+@pytest.mark.parametrize("option", ["-o", "--report"])
+def test_a_stream_never_names_several_files(tmp_path, capsys, extra, option):
+    """Outputs named after -o (NAME_level130.ply, NAME_label3.ply) cannot be made
+    from /dev/stdout: as root they were new files in /dev."""
+    before = set(os.listdir("/dev"))
+    args = ["convert", SPHERE, *extra, "--format", "ply", "--force"]
+    if option == "-o":
+        args += ["-o", "/dev/stdout"]
+    else:
+        args += ["-o", tmp_path / "m.ply", "--report=/dev/stdout"]
+    code, _, err = run(capsys, *args)
+    assert_one_line_error(code, err, "/dev/stdout", "stream")
+    assert set(os.listdir("/dev")) == before
+    assert os.listdir(tmp_path) == []
