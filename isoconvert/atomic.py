@@ -114,7 +114,9 @@ def refuse_inputs(path: str | Path, inputs: Iterable[str | Path]) -> None:
         if _identity(source) == target:
             same_name = os.path.abspath(source) == os.path.abspath(path)
             what = "the input" if same_name else f"a file the input reads ({source})"
-            raise OutputError(f"{path}: is {what}; writing it would destroy it, choose another -o")
+            raise OutputError(
+                f"{path}: is {what}; writing it would destroy it: choose another name"
+            )
         if source.is_dir() and real.is_relative_to(os.path.realpath(source)) and path.is_file():
             raise OutputError(
                 f"{path}: lies inside {source}, which is being read; choose another -o"

@@ -1099,7 +1099,9 @@ def batch(
         if summary.resolve().parent.is_relative_to(out_dir.resolve()):
             early = batching.make_folders(summary.parent)  # inside -o, which batch makes
         try:
-            check_output(summary, force or skip_existing, "summary.json")
+            # never over the --levels table or an input given as a file (a zarr.json)
+            read = [f for f in (levels, *map(Path, inputs)) if f is not None and f.is_file()]
+            check_output(summary, force or skip_existing, "summary.json", inputs=read)
         except IsoconvertError:
             batching.remove_empty_folders(early)
             raise

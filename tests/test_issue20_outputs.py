@@ -447,3 +447,17 @@ def test_a_stream_never_names_several_files(tmp_path, capsys, extra, option):
     assert_one_line_error(code, err, "/dev/stdout", "stream")
     assert set(os.listdir("/dev")) == before
     assert os.listdir(tmp_path) == []
+
+
+def test_batch_summary_never_replaces_the_levels_table(tmp_path, capsys):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    (folder / "sphere.nrrd").write_bytes(Path(SPHERE).read_bytes())
+    table = tmp_path / "levels.csv"
+    table.write_text("pattern,level\n*.nrrd,127.5\n")
+    before = digest(table)
+    args = ["batch", folder, "-o", tmp_path / "out", "--levels", table, "--summary", table]
+    code, _, err = run(capsys, *args, "--force")
+    assert_one_line_error(code, err, str(table), "destroy")
+    assert digest(table) == before
+    assert not (tmp_path / "out").exists()
