@@ -18,10 +18,10 @@ import numpy as np
 from .errors import VolumeError
 from .extract.prepare import kernel_type
 from .grid import grid_slab_zyx
+from .memory import row_chunks
 from .mesh import Mesh
 from .threads import kernel_threads
 from .volume import Volume
-from .writers.chunks import row_chunks
 
 #: Grid layers read at a time when the volume is read from its file.
 SLAB_LAYERS = 64

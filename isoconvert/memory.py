@@ -1,4 +1,14 @@
-"""How much memory there is, so that declared sizes can be refused before allocating."""
+"""Memory: how much there is (declared sizes are refused before allocating), file-backed
+maps that hand their pages back, and arrays walked a block of rows at a time.
+
+A mesh built block-wise may live in file-backed memory maps
+(:mod:`isoconvert.extract.blocks`, when it outgrows the memory budget).
+Reading such an array keeps each page it touched mapped in the process, so
+:func:`row_chunks` gives those pages back after each block: a writer (or
+:mod:`isoconvert.attributes`) then streams a mesh of any size through a
+bounded amount of memory. This module is part of the model layer: extraction
+and the writers both use it, and neither imports the other for it.
+"""
 
 from __future__ import annotations
 
@@ -6,9 +16,18 @@ import contextlib
 import errno
 import mmap
 import os
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .errors import OutputError, VolumeError
+
+if TYPE_CHECKING:
+    import numpy as np
+
+#: Rows per block of :func:`row_chunks`: large enough for numpy to run at full
+#: speed, small enough that temporaries stay in cache.
+ROWS = 1 << 16
 
 
 def available_memory() -> int | None:
@@ -41,7 +60,7 @@ class FileMap(mmap.mmap):
     """A shared memory map of a temporary file (a mesh that outgrew memory).
 
     Its pages are the file's: giving them back (``madvise(MADV_DONTNEED)``, see
-    :func:`isoconvert.writers.chunks.row_chunks`) loses nothing, whereas on an
+    :func:`row_chunks`) loses nothing, whereas on an
     anonymous map it would erase them. Only maps of this type are released.
 
     Make one with :meth:`create` and grow it with :meth:`grow`: both give the
@@ -121,3 +140,54 @@ def _write_zeros(fd: int, start: int, stop: int) -> None:
         done = 0
         while done < n:
             done += os.pwrite(fd, zeros[: n - done], at + done)
+
+
+# --- arrays a block of rows at a time ----------------------------------------------------------
+
+
+def _file_map(array: np.ndarray) -> FileMap | None:
+    """The file-backed memory map ``array`` views, if any."""
+    base = array
+    while base is not None:
+        if isinstance(base, mmap.mmap):
+            return base if isinstance(base, FileMap) else None
+        base = base.obj if isinstance(base, memoryview) else getattr(base, "base", None)
+    return None
+
+
+def release(array: np.ndarray) -> None:
+    """Give back the whole pages of ``array`` when it views a :class:`FileMap`
+    (nothing is lost: they are the file's); a no-op for any other array."""
+    mapped = _file_map(array) if hasattr(mmap, "MADV_DONTNEED") else None
+    if mapped is None or not array.size:
+        return
+    import numpy as np  # here: the rest of this module serves callers without numpy
+
+    start = np.frombuffer(mapped, dtype=np.uint8, count=1).ctypes.data
+    first = array.ctypes.data - start
+    end = first + array.nbytes
+    first += -first % mmap.PAGESIZE  # pages wholly inside the array
+    end -= end % mmap.PAGESIZE
+    if end > first:
+        mapped.madvise(mmap.MADV_DONTNEED, first, end - first)
+
+
+def row_chunks(array: np.ndarray, rows: int = ROWS) -> Iterator[np.ndarray]:
+    """Yield ``array[a : a + rows]`` for a = 0, rows, 2 rows, ...; pages of a
+    file-backed map are given back once their block has been used.
+
+    Parameters
+    ----------
+    array : (N, ...) array
+    rows : int
+
+    Yields
+    ------
+    (<= rows, ...) array
+        Views of ``array``, in order.
+    """
+    for a in range(0, len(array), rows):
+        block = array[a : a + rows]
+        yield block
+        # with the previous block's tail, so that pages across a cut go too
+        release(array[max(0, a - 1) : a + rows])

@@ -63,7 +63,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -82,8 +81,8 @@ from .graph import (
 from .mesh import Mesh
 from .threads import kernel_threads
 
-if TYPE_CHECKING:
-    from .volume import Volume
+# the grid description belongs to the model (extraction records it too); offered here still
+from .volume import grid_from_volume as grid_from_volume
 
 SCHEMA_VERSION = 1
 #: The JSON schema of :meth:`Report.to_dict`, shipped with the package.
@@ -192,32 +191,6 @@ LABEL_NOTE = (
 LABEL_CHECKS = ("watertight", "manifold", "oriented", "no-holes")
 #: Labels listed one per line in the printed report.
 _LABEL_LINES = 12
-
-
-def grid_from_volume(volume: Volume) -> dict:
-    """The grid of a volume, as extracted meshes record it in ``info["grid"]``.
-
-    Pass it as ``check_mesh(mesh, grid=...)`` to judge a mesh file's boundaries
-    against the volume it was extracted from (``isoconvert check --grid VOLUME``).
-
-    Parameters
-    ----------
-    volume : Volume
-        Only its shape and placement are used (no samples are read).
-
-    Returns
-    -------
-    dict
-        ``shape`` (ndim,) list of int, ``origin`` (ndim,) list of float and
-        ``affine`` (ndim, ndim) nested list of float (index offsets to world
-        offsets, :attr:`Volume.affine`): plain lists, ready for JSON or a
-        file header.
-    """
-    return {
-        "shape": [int(n) for n in volume.shape],
-        "origin": np.asarray(volume.origin, dtype=np.float64).tolist(),
-        "affine": np.asarray(volume.affine, dtype=np.float64).tolist(),
-    }
 
 
 def _stored_precision(info: dict, vertices: np.ndarray) -> str:

@@ -292,3 +292,30 @@ def value_range(data: np.ndarray) -> ValueRange:
         lo = min(lo, float(slab.min()))
         hi = max(hi, float(slab.max()))
     return ValueRange(lo, hi, bad)
+
+
+def grid_from_volume(volume: Volume) -> dict:
+    """The grid of a volume, as extracted meshes record it in ``info["grid"]``.
+
+    Extractors record it in the meshes they make. Pass it as
+    ``isoconvert.check_mesh(mesh, grid=...)`` to judge a mesh file's boundaries
+    against the volume it was extracted from (``isoconvert check --grid VOLUME``).
+
+    Parameters
+    ----------
+    volume : Volume
+        Only its shape and placement are used (no samples are read).
+
+    Returns
+    -------
+    dict
+        ``shape`` (ndim,) list of int, ``origin`` (ndim,) list of float and
+        ``affine`` (ndim, ndim) nested list of float (index offsets to world
+        offsets, :attr:`Volume.affine`): plain lists, ready for JSON or a
+        file header.
+    """
+    return {
+        "shape": [int(n) for n in volume.shape],
+        "origin": np.asarray(volume.origin, dtype=np.float64).tolist(),
+        "affine": np.asarray(volume.affine, dtype=np.float64).tolist(),
+    }

@@ -553,7 +553,7 @@ class MeshSink:
 class BlockMesh(Mesh):
     """A mesh built block-wise that outgrew memory: its arrays are memory maps
     of temporary files (writers stream them, see
-    :func:`isoconvert.writers.chunks.row_chunks`), and it knows where each
+    :func:`isoconvert.memory.row_chunks`), and it knows where each
     slab's vertices and cells start.
 
     Attributes
@@ -591,7 +591,7 @@ class BlockMesh(Mesh):
             return None
         starts = [*self.slab_starts, (len(self.vertices), len(self.cells), 0)]
 
-        from ..writers.chunks import release
+        from ..memory import release
 
         def pieces():
             for s in range(len(starts) - 1):

@@ -7,8 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..report import grid_from_volume
-from ..volume import Volume
+from ..volume import Volume, grid_from_volume
 
 
 def reversed_orientation(volume: Volume, flip: bool) -> bool:
