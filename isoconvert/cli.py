@@ -7,13 +7,16 @@ stderr), 2 a usage error, 3 an internal error (a bug), 4 a check named by
 
 from __future__ import annotations
 
+import functools
+import inspect
 import json
 import sys
 import time
 from contextlib import contextmanager, nullcontext, redirect_stdout
+from dataclasses import dataclass, fields, replace
 from enum import Enum
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, get_type_hints
 
 import typer
 
@@ -405,44 +408,6 @@ def _vertex_offset(no_degenerate: bool, exact: bool) -> float | None:
     return 0.0 if exact else None
 
 
-def _read_kwargs(
-    input_format,
-    shape,
-    dtype,
-    endian,
-    header_bytes,
-    channel,
-    spacing,
-    origin,
-    allow_outside_data=False,
-    scale=0,
-    allow_missing_chunks=False,
-    key=None,
-    volume_index=None,
-    series=None,
-):
-    kwargs = {
-        "input_format": input_format,
-        "spacing": _numbers(spacing, "--spacing"),
-        "origin": _numbers(origin, "--origin"),
-    }
-    opts = {
-        "shape": _numbers(shape, "--shape", int),
-        "dtype": dtype,
-        "endian": endian.value if isinstance(endian, Enum) else endian,
-        "header_bytes": header_bytes,
-        "channel": channel,
-        "allow_outside_data": allow_outside_data or None,
-        "scale": scale or None,
-        "allow_missing_chunks": allow_missing_chunks or None,
-        "key": key,
-        "volume_index": volume_index,
-        "series": series,
-    }
-    kwargs.update({k: v for k, v in opts.items() if v is not None})
-    return kwargs
-
-
 @app.callback(invoke_without_command=True)
 def _main(
     version: Annotated[bool, _flag("--version", help="Show the version.")] = False,
@@ -480,43 +445,109 @@ LevelOpt = Annotated[
 ]
 
 
-@app.command(cls=_Command)
-def convert(
-    input: Annotated[str, typer.Argument(help="Volume file, folder of TIFF slices, or glob.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Mesh file to write.")],
-    level: LevelOpt = None,
+QuietOpt = Annotated[bool, _flag("--quiet", "-q", help="Print only errors.")]
+ForceOpt = Annotated[bool, _flag("--force", "-f", help="Overwrite existing outputs.")]
+
+# --- option groups -----------------------------------------------------------------------
+# Each group of options that convert and batch share is declared once, as the
+# fields of a dataclass whose types carry the typer option (help text, panel).
+# A command names a group as one parameter (``read: ReadArgs``); `_grouped`
+# spreads it into one option per field, so that `--help` lists them as before,
+# and gathers them back into one value when the command runs. Both commands
+# turn the groups into ConvertOptions through `_convert_options`, so a new
+# option is one field and one line there.
+
+
+@dataclass(frozen=True)
+class ReadArgs:
+    """How to read a volume ("Input" panel): convert, batch, info; check, in part."""
+
+    input_format: InputFormatOpt = None
+    shape: ShapeOpt = None
+    dtype: DtypeOpt = None
+    endian: EndianOpt = Endian.little
+    header_bytes: HeaderBytesOpt = 0
+    channel: ChannelOpt = None
+    spacing: SpacingOpt = None
+    origin: OriginOpt = None
+    allow_outside_data: AllowOutsideOpt = False
+    scale: ScaleOpt = 0
+    allow_missing_chunks: MissingChunksOpt = False
+    key: KeyOpt = None
+    volume_index: VolumeIndexOpt = None
+    series: SeriesOpt = None
+
+    def read_options(self, raw_layout: bool = True):
+        """The ReadOptions these options say (without the raw layout: shape,
+        dtype, endian and header bytes, which batch gives raw files only)."""
+        from .readers import ReadOptions
+
+        layout = self.raw_layout() if raw_layout else {}
+        return ReadOptions(
+            **layout,
+            channel=self.channel,
+            allow_outside_data=self.allow_outside_data,
+            scale=self.scale,
+            allow_missing_chunks=self.allow_missing_chunks,
+            key=self.key,
+            volume_index=self.volume_index,
+            series=self.series,
+        )
+
+    def raw_layout(self) -> dict:
+        """The raw file layout given (shape, dtype, endian, header bytes)."""
+        layout = {
+            "shape": _numbers(self.shape, "--shape", int),
+            "dtype": self.dtype,
+            "endian": self.endian.value if isinstance(self.endian, Enum) else self.endian,
+            "header_bytes": self.header_bytes,
+        }
+        return {k: v for k, v in layout.items() if v is not None}
+
+    def placement(self) -> dict:
+        """``spacing`` and ``origin`` as numbers (None where not given)."""
+        return {
+            "spacing": _numbers(self.spacing, "--spacing"),
+            "origin": _numbers(self.origin, "--origin"),
+        }
+
+    def read(self, path: str):
+        """The volume at ``path``, read as these options say (info, check --grid)."""
+        from .readers import read_volume
+
+        opts = self.read_options()
+        given = {name: getattr(opts, name) for name in opts.given()}
+        return read_volume(path, format=self.input_format, **self.placement(), **given)
+
+
+@dataclass(frozen=True)
+class ExtractArgs:
+    """How to extract the surface (the main panel)."""
+
     method: Annotated[
         str | None,
         typer.Option(
             help=f"Extraction method: {', '.join(EXTRACTORS.names())} "
             "(default: squares for 2D images, cubes for 3D; see `isoconvert methods`)."
         ),
-    ] = None,
+    ] = None
     axis: Annotated[
         Axis | None,
         typer.Option(help="squares on a 3D volume: contour every slice across this axis."),
-    ] = None,
-    format: Annotated[
-        str | None,
-        typer.Option(
-            help=f"Output format: {', '.join(WRITERS.names())} (default: from the extension)."
-        ),
-    ] = None,
-    ascii: Annotated[bool, _flag("--ascii", help="Text PLY/STL/VTP instead of binary.")] = False,
-    force: Annotated[bool, _flag("--force", "-f", help="Overwrite the output.")] = False,
+    ] = None
     flip: Annotated[
         bool, _flag("--flip", help="Reverse orientation (normals toward higher values).")
-    ] = False,
+    ] = False
     ambiguity: Annotated[
         Ambiguity | None,
         typer.Option(
             help="Rule for ambiguous faces (default separate-positive, as VTK and "
             "scikit-image); asymptotic: squares only."
         ),
-    ] = None,
+    ] = None
     nan_as: Annotated[
         float | None, typer.Option(help="Treat NaN/Inf samples as this value (else an error).")
-    ] = None,
+    ] = None
     no_degenerate: Annotated[
         bool,
         _flag(
@@ -524,7 +555,7 @@ def convert(
             help=f"Keep every vertex {NO_DEGENERATE_OFFSET:g} of an edge away from grid "
             "vertices (the default only when the level equals some sample values).",
         ),
-    ] = False,
+    ] = False
     exact_placement: Annotated[
         bool,
         _flag(
@@ -532,7 +563,195 @@ def convert(
             help="Place vertices exactly by linear interpolation even when the level equals "
             "sample values (zero-length edges and degenerate triangles there).",
         ),
-    ] = False,
+    ] = False
+
+
+@dataclass(frozen=True)
+class MeshArgs:
+    """What the mesh file holds: its format, text or binary, frame and normals."""
+
+    format: Annotated[
+        str | None,
+        typer.Option(
+            help=f"Output format: {', '.join(WRITERS.names())} (default: from the output's "
+            "extension; batch: ply)."
+        ),
+    ] = None
+    ascii: Annotated[bool, _flag("--ascii", help="Text PLY/STL/VTP instead of binary.")] = False
+    space: SpaceOpt = None
+    normals: NormalsOpt = False
+
+
+@dataclass(frozen=True)
+class PostArgs:
+    """Post-processing: closing, clean-up, smoothing, decimation."""
+
+    close: CloseOpt = False
+    largest: LargestOpt = False
+    keep: KeepOpt = None
+    min_size: MinSizeOpt = None
+    min_volume: MinVolumeOpt = None
+    fill_cavities: FillCavitiesOpt = False
+    smooth: SmoothOpt = None
+    smooth_method: SmoothMethodOpt = "sinc"
+    passband: PassbandOpt = 0.1
+    decimate: DecimateOpt = None
+    max_error: MaxErrorOpt = None
+
+    def options(self):
+        """The PostOptions these options say."""
+        from .post.pipeline import PostOptions
+
+        if self.largest and self.keep is not None:
+            raise IsoconvertError("--largest is --keep 1; give one of them")
+        return PostOptions(
+            close=self.close,
+            keep=1 if self.largest else self.keep,
+            min_size=self.min_size,
+            min_volume=self.min_volume,
+            fill_cavities=self.fill_cavities,
+            smooth=self.smooth or 0,
+            smooth_method=self.smooth_method,
+            passband=self.passband,
+            decimate=self.decimate,
+            max_error=self.max_error,
+        )
+
+
+@dataclass(frozen=True)
+class MemoryArgs:
+    """Large volumes: slabs, the memory budget, a Dask cluster."""
+
+    block_size: Annotated[
+        int | None,
+        typer.Option(
+            help="Extract block-wise, this many z-layers per block (default: as "
+            "--max-memory allows, and only for volumes larger than it).",
+            rich_help_panel="Large volumes",
+        ),
+    ] = None
+    max_memory: Annotated[
+        str | None,
+        typer.Option(
+            help="Memory for samples at once, e.g. 2G (default 1G; batch: 80% of what is "
+            "available, shared by the files converted at once): a volume read from its "
+            "file that is larger is extracted block-wise.",
+            rich_help_panel="Large volumes",
+        ),
+    ] = None
+    scheduler: SchedulerOpt = None
+
+
+@dataclass(frozen=True)
+class LabelArgs:
+    """Label volumes: one surface per label."""
+
+    labels: LabelsOpt = False
+    label: LabelOpt = None
+    single_file: SingleFileOpt = False
+    background: BackgroundOpt = 0
+
+    def chosen(self, level) -> tuple[int, ...] | None:
+        """The labels wanted (empty: every label), or None for an isosurface."""
+        wanted = _label_list(self.label)
+        labels = self.labels or wanted is not None
+        if self.background and not labels:
+            raise IsoconvertError("--background is the value of no label; it goes with --labels")
+        if self.single_file and not labels:
+            raise IsoconvertError("--single-file writes the surfaces of --labels; add --labels")
+        if labels and level:
+            raise IsoconvertError("--labels extracts every label's boundary: leave out --level")
+        return (wanted or ()) if labels else None
+
+
+_GROUPS = (ReadArgs, ExtractArgs, MeshArgs, PostArgs, MemoryArgs, LabelArgs)
+_KEYWORD = inspect.Parameter.KEYWORD_ONLY
+
+
+def _grouped(*omit: str):
+    """Spread a command's option-group parameters into typer options, one per field
+    (but those named in ``omit``), and gather them back when the command runs."""
+
+    def decorate(command):
+        hints = get_type_hints(command, include_extras=True)
+        params, groups = [], {}
+        for param in inspect.signature(command).parameters.values():
+            kind = hints[param.name]
+            if kind not in _GROUPS:
+                params.append(param.replace(annotation=kind, kind=param.KEYWORD_ONLY))
+                continue
+            types = get_type_hints(kind, include_extras=True)
+            names = [f.name for f in fields(kind) if f.name not in omit]
+            given = param.default  # the group's defaults (a command may set its own)
+            params += [
+                inspect.Parameter(n, _KEYWORD, default=getattr(given, n), annotation=types[n])
+                for n in names
+            ]
+            groups[param.name] = (given, names)
+
+        @functools.wraps(command)
+        def run(**kwargs):
+            for name, (given, names) in groups.items():
+                kwargs[name] = replace(given, **{n: kwargs.pop(n) for n in names})
+            return command(**kwargs)
+
+        run.__signature__ = inspect.Signature(params)
+        run.__annotations__ = {p.name: p.annotation for p in params}
+        return run
+
+    return decorate
+
+
+def _convert_options(
+    read: ReadArgs,
+    extract: ExtractArgs,
+    mesh: MeshArgs,
+    post: PostArgs,
+    labels: LabelArgs,
+    level,
+    *,
+    raw_layout: bool = True,
+    **changes,
+):
+    """The ConvertOptions of convert's and batch's shared option groups; ``changes``
+    are a command's own (force, blocks, values).
+
+    ``raw_layout`` False leaves out the raw layout (which batch gives raw files only).
+    """
+    from .convert import ConvertOptions
+
+    chosen = labels.chosen(level)
+    options = ConvertOptions(
+        read=read.read_options(raw_layout),
+        input_format=read.input_format,
+        **read.placement(),
+        method=extract.method,
+        flip=extract.flip,
+        ambiguity=extract.ambiguity.value if extract.ambiguity else None,
+        axis=extract.axis.value if extract.axis else None,
+        vertex_offset=_vertex_offset(extract.no_degenerate, extract.exact_placement),
+        nan_as=extract.nan_as,
+        format=mesh.format,
+        ascii=mesh.ascii,
+        space=mesh.space,
+        normals=mesh.normals,
+        post=post.options(),
+        labels=chosen,
+        single_file=labels.single_file,
+        background=labels.background,
+        label_smoothing=post.smooth if chosen is not None else None,
+    )
+    return replace(options, **changes)
+
+
+@app.command(cls=_Command)
+@_grouped()
+def convert(
+    input: Annotated[str, typer.Argument(help="Volume file, folder of TIFF slices, or glob.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Mesh file to write.")],
+    level: LevelOpt = None,
+    extract: ExtractArgs = ExtractArgs(),
+    force: ForceOpt = False,
     report: Annotated[
         str | None,
         typer.Option(
@@ -551,24 +770,10 @@ def convert(
             rich_help_panel="Output",
         ),
     ] = None,
-    quiet: Annotated[bool, _flag("--quiet", "-q", help="Print only errors.")] = False,
+    quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
-    input_format: InputFormatOpt = None,
-    shape: ShapeOpt = None,
-    dtype: DtypeOpt = None,
-    endian: EndianOpt = Endian.little,
-    header_bytes: HeaderBytesOpt = 0,
-    channel: ChannelOpt = None,
-    spacing: SpacingOpt = None,
-    origin: OriginOpt = None,
-    allow_outside_data: AllowOutsideOpt = False,
-    scale: ScaleOpt = 0,
-    allow_missing_chunks: MissingChunksOpt = False,
-    key: KeyOpt = None,
-    volume_index: VolumeIndexOpt = None,
-    series: SeriesOpt = None,
-    space: SpaceOpt = None,
-    normals: NormalsOpt = False,
+    read: ReadArgs = ReadArgs(),
+    mesh: MeshArgs = MeshArgs(),
     values: Annotated[
         str | None,
         typer.Option(
@@ -577,38 +782,9 @@ def convert(
             rich_help_panel="Output",
         ),
     ] = None,
-    close: CloseOpt = False,
-    largest: LargestOpt = False,
-    keep: KeepOpt = None,
-    min_size: MinSizeOpt = None,
-    min_volume: MinVolumeOpt = None,
-    fill_cavities: FillCavitiesOpt = False,
-    smooth: SmoothOpt = None,
-    smooth_method: SmoothMethodOpt = "sinc",
-    passband: PassbandOpt = 0.1,
-    decimate: DecimateOpt = None,
-    max_error: MaxErrorOpt = None,
-    block_size: Annotated[
-        int | None,
-        typer.Option(
-            help="Extract block-wise, this many z-layers per block (default: as "
-            "--max-memory allows, and only for volumes larger than it).",
-            rich_help_panel="Large volumes",
-        ),
-    ] = None,
-    max_memory: Annotated[
-        str | None,
-        typer.Option(
-            help="Memory for samples at once, e.g. 2G (default 1G): a volume read from its "
-            "file that is larger is extracted block-wise.",
-            rich_help_panel="Large volumes",
-        ),
-    ] = None,
-    scheduler: SchedulerOpt = None,
-    labels: LabelsOpt = False,
-    label: LabelOpt = None,
-    single_file: SingleFileOpt = False,
-    background: BackgroundOpt = 0,
+    post: PostArgs = PostArgs(),
+    memory: MemoryArgs = MemoryArgs(),
+    labels: LabelArgs = LabelArgs(),
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
     _quiet_third_party()
@@ -618,31 +794,28 @@ def convert(
     from .convert import convert_levels, level_outputs
     from .label_convert import convert_labels
 
-    labels, wanted = _label_choice(labels, label, single_file, background, level)
-    if not labels and not level:
+    options = _convert_options(
+        read,
+        extract,
+        mesh,
+        post,
+        labels,
+        level,
+        force=force,
+        values=values,
+        blocks=_blocks(memory.block_size, memory.max_memory, memory.scheduler),
+    )
+    by_label = options.labels is not None
+    if not by_label and not level:
         raise IsoconvertError(
             "convert needs --level (a number, or auto), or --labels for a label volume"
         )
-
-    post = _post_options(
-        close,
-        largest,
-        keep,
-        min_size,
-        min_volume,
-        fill_cavities,
-        smooth,
-        smooth_method,
-        passband,
-        decimate,
-        max_error,
-    )
     reports = None
-    if report not in (None, "-") and not labels:
+    if report not in (None, "-") and not by_label:
         reports = level_outputs(report, level)
         for path in reports:
             check_output(path, force, "report.json")  # a bad report name must not cost a mesh
-    elif report not in (None, "-") and not single_file and len(wanted or ()) != 1:
+    elif report not in (None, "-") and not options.single_file and len(options.labels or ()) != 1:
         from .atomic import refuse_stream
 
         refuse_stream(report, "--labels writes a report per label")
@@ -653,83 +826,46 @@ def convert(
         check_picture_output(preview, force)
     # reports and pictures must not replace an input's file either
     also_writes = [*(reports or ()), *([preview] if preview is not None else ())]
-    if labels and report not in (None, "-"):
+    if by_label and report not in (None, "-"):
         also_writes.append(report)
     start = time.perf_counter()
     with _stage_display(quiet, verbose) as (on_progress, on_status):
-        if labels:
-            run, first = convert_labels, wanted or ()
-            extra = {
-                "single_file": single_file,
-                "background": background,
-                "label_smoothing": smooth,
-            }
-        else:
-            run, first, extra = convert_levels, level, {}
+        run, first = (convert_labels, options.labels) if by_label else (convert_levels, level)
         results = run(
             input,
             output,
             first,
+            options,
             also_writes=also_writes,
-            **extra,
-            method=method,
-            format=format,
-            ascii=ascii,
-            force=force,
-            flip=flip,
-            ambiguity=ambiguity.value if ambiguity else None,
-            axis=axis.value if axis else None,
-            vertex_offset=_vertex_offset(no_degenerate, exact_placement),
-            nan_as=nan_as,
-            space=space,
-            normals=normals,
-            values=values,
-            post=post,
-            blocks=_blocks(block_size, max_memory, scheduler),
             on_status=on_status,
             on_progress=on_progress,
-            **_read_kwargs(
-                input_format,
-                shape,
-                dtype,
-                endian,
-                header_bytes,
-                channel,
-                spacing,
-                origin,
-                allow_outside_data,
-                scale,
-                allow_missing_chunks,
-                key,
-                volume_index,
-                series,
-            ),
         )
     if not quiet:
         for note in results[0].volume.notes:
             print(f"note: {note}", file=sys.stderr)
-    if labels and report not in (None, "-"):
+    if by_label and report not in (None, "-"):
         name = Path(report)
         reports = [name.with_name(f"{name.stem}_{r.output.stem}{name.suffix}")
                    for r in results] if len(results) > 1 else [report]  # fmt: skip
     failed = []
+    steps = options.post.steps
     for n, result in enumerate(results):
         if not quiet:
-            mesh = result.mesh
-            kind = "triangles" if mesh.is_triangles else "segments"
-            kind = f"{kind}, {mesh.info['method']}"
-            slabs = mesh.info.get("blocks", 1)
+            made = result.mesh
+            kind = "triangles" if made.is_triangles else "segments"
+            kind = f"{kind}, {made.info['method']}"
+            slabs = made.info.get("blocks", 1)
             if slabs > 1:
                 kind += f" in {slabs} slabs"
-            steps = f", {', '.join(post.steps)}" if post.steps and not labels else ""
-            what = mesh.info["level"]
-            if labels and single_file:
+            done = f", {', '.join(steps)}" if steps and not by_label else ""
+            what = made.info["level"]
+            if by_label and options.single_file:
                 what = f"labels {what}"
             else:
-                what = f"label {what:g}" if labels else f"level {what:g}"
+                what = f"label {what:g}" if by_label else f"level {what:g}"
             print(
-                f"wrote {result.output}: {mesh.n_vertices:,} vertices, {mesh.n_cells:,} {kind} "
-                f"({what}{steps}, {time.perf_counter() - start:.2f} s)"
+                f"wrote {result.output}: {made.n_vertices:,} vertices, {made.n_cells:,} {kind} "
+                f"({what}{done}, {time.perf_counter() - start:.2f} s)"
             )
         if report is not None or required:
             target = reports[n] if reports else report
@@ -759,20 +895,6 @@ def _write_preview(
         print(f"wrote {target}: preview", file=sys.stderr)
 
 
-def _label_choice(labels, label, single_file, background, level):
-    """Whether the labels of a label volume are wanted, and which (None: all),
-    from --labels, --label, --single-file, --background and --level."""
-    wanted = _label_list(label)
-    labels = labels or wanted is not None
-    if background and not labels:
-        raise IsoconvertError("--background is the value of no label; it goes with --labels")
-    if single_file and not labels:
-        raise IsoconvertError("--single-file writes the surfaces of --labels; add --labels")
-    if labels and level:
-        raise IsoconvertError("--labels extracts every label's boundary: leave out --level")
-    return labels, wanted
-
-
 def _label_list(text: str | None) -> tuple[int, ...] | None:
     """The labels of --label 3,7 (None when not given)."""
     if text is None:
@@ -783,38 +905,6 @@ def _label_list(text: str | None) -> tuple[int, ...] | None:
         raise IsoconvertError(
             f"--label takes whole numbers, e.g. --label 3,7; got {text!r}"
         ) from None
-
-
-def _post_options(
-    close,
-    largest,
-    keep,
-    min_size,
-    min_volume,
-    fill_cavities,
-    smooth,
-    smooth_method,
-    passband,
-    decimate,
-    max_error,
-):
-    """The PostOptions of convert's and batch's post-processing options."""
-    from .post.pipeline import PostOptions
-
-    if largest and keep is not None:
-        raise IsoconvertError("--largest is --keep 1; give one of them")
-    return PostOptions(
-        close=close,
-        keep=1 if largest else keep,
-        min_size=min_size,
-        min_volume=min_volume,
-        fill_cavities=fill_cavities,
-        smooth=smooth or 0,
-        smooth_method=smooth_method,
-        passband=passband,
-        decimate=decimate,
-        max_error=max_error,
-    )
 
 
 def _report_result(result, target, required, examples, force, quiet) -> list[str]:
@@ -848,6 +938,7 @@ def _report_result(result, target, required, examples, force, quiet) -> list[str
 
 
 @app.command(cls=_Command)
+@_grouped("channel", "scale", "allow_missing_chunks", "key", "volume_index", "series")
 def check(
     mesh_file: Annotated[
         Path, typer.Argument(help="PLY, OBJ, OFF, STL, VTP, GLB or 3MF file to check.")
@@ -873,14 +964,7 @@ def check(
             rich_help_panel="Checks",
         ),
     ] = None,
-    input_format: InputFormatOpt = None,
-    shape: ShapeOpt = None,
-    dtype: DtypeOpt = None,
-    endian: EndianOpt = Endian.little,
-    header_bytes: HeaderBytesOpt = 0,
-    spacing: SpacingOpt = None,
-    origin: OriginOpt = None,
-    allow_outside_data: AllowOutsideOpt = False,
+    read: ReadArgs = ReadArgs(),
 ) -> None:
     """Report on a mesh file: degenerate elements, holes, manifoldness, orientation, topology."""
     _quiet_third_party()
@@ -890,29 +974,16 @@ def check(
     required = parse_requirements(require)
     frame = grid_files = None
     if grid is not None:
-        from .readers import read_volume
-
-        kwargs = _read_kwargs(
-            input_format,
-            shape,
-            dtype,
-            endian,
-            header_bytes,
-            None,
-            spacing,
-            origin,
-            allow_outside_data,
-        )
-        grid_volume = read_volume(grid, format=kwargs.pop("input_format"), **kwargs)
+        grid_volume = read.read(grid)
         grid_files = grid_volume.files
         frame = grid_from_volume(grid_volume)
     if report is not None and report != "-":  # before reading: a bad name must not cost a check
-        read = [mesh_file, *(grid_files or ())]
-        check_output(report, force, "report.txt", inputs=read)
+        sources = [mesh_file, *(grid_files or ())]
+        check_output(report, force, "report.txt", inputs=sources)
     mesh = read_mesh(mesh_file)
     checked = check_mesh(mesh, examples=examples, source=str(mesh_file), grid=frame)
     if report is not None and report != "-":
-        _emit_report(checked, report, [], as_json=False, force=force, quiet=True, inputs=read)
+        _emit_report(checked, report, [], as_json=False, force=force, quiet=True, inputs=sources)
     _emit_report(checked, "-", required, as_json=as_json, force=force, quiet=quiet)
 
 
@@ -974,6 +1045,7 @@ def _emit_report(
 
 
 @app.command(cls=_Command)
+@_grouped("input_format", "series")
 def batch(
     inputs: Annotated[list[str], typer.Argument(help="Files, folders or globs of volumes.")],
     out_dir: Annotated[Path, typer.Option("-o", "--output", help="Folder for the meshes.")],
@@ -983,45 +1055,20 @@ def batch(
         typer.Option(help="TOML or CSV mapping of path patterns to level and read options."),
     ] = None,
     recursive: Annotated[bool, _flag("--recursive", "-r", help="Search sub-folders.")] = False,
-    format: Annotated[
-        str, typer.Option(help=f"Output format: {', '.join(WRITERS.names())}.")
-    ] = "ply",
-    method: Annotated[str | None, typer.Option(help="Extraction method (as convert).")] = None,
-    ascii: Annotated[bool, _flag("--ascii", help="Text PLY/STL/VTP.")] = False,
-    flip: Annotated[bool, _flag("--flip", help="Reverse orientation.")] = False,
-    no_degenerate: Annotated[
-        bool, _flag("--no-degenerate", help="As convert: always keep vertices off samples.")
-    ] = False,
-    exact_placement: Annotated[
-        bool, _flag("--exact-placement", help="As convert: never move vertices off samples.")
-    ] = False,
+    extract: ExtractArgs = ExtractArgs(),
     jobs: Annotated[
         int | None, typer.Option("--jobs", "-j", help="Worker processes (default: cores).")
-    ] = None,
-    max_memory: Annotated[
-        str | None,
-        typer.Option(
-            help="Memory the running conversions may use together, e.g. 8G "
-            "(default: 80% of what is available)."
-        ),
     ] = None,
     skip_existing: Annotated[
         bool, _flag("--skip-existing", help="Keep outputs that exist; convert the rest.")
     ] = False,
-    force: Annotated[bool, _flag("--force", "-f", help="Overwrite existing outputs.")] = False,
+    force: ForceOpt = False,
     summary: Annotated[
         Path | None, typer.Option(help="Write a summary table as FILE.json or FILE.csv.")
     ] = None,
     require: RequireOpt = None,
-    quiet: Annotated[bool, _flag("--quiet", "-q", help="Print only errors.")] = False,
+    quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
-    shape: ShapeOpt = None,
-    dtype: DtypeOpt = None,
-    endian: EndianOpt = Endian.little,
-    header_bytes: HeaderBytesOpt = 0,
-    spacing: SpacingOpt = None,
-    allow_outside_data: AllowOutsideOpt = False,
-    allow_missing_chunks: MissingChunksOpt = False,
     images: Annotated[
         bool,
         _flag(
@@ -1030,24 +1077,6 @@ def batch(
             "(implied by --method squares).",
         ),
     ] = False,
-    space: SpaceOpt = None,
-    normals: NormalsOpt = False,
-    close: CloseOpt = False,
-    largest: LargestOpt = False,
-    keep: KeepOpt = None,
-    min_size: MinSizeOpt = None,
-    min_volume: MinVolumeOpt = None,
-    fill_cavities: FillCavitiesOpt = False,
-    smooth: SmoothOpt = None,
-    smooth_method: SmoothMethodOpt = "sinc",
-    passband: PassbandOpt = 0.1,
-    decimate: DecimateOpt = None,
-    max_error: MaxErrorOpt = None,
-    scheduler: SchedulerOpt = None,
-    labels: LabelsOpt = False,
-    label: LabelOpt = None,
-    single_file: SingleFileOpt = False,
-    background: BackgroundOpt = 0,
     previews: Annotated[
         bool,
         _flag(
@@ -1056,6 +1085,11 @@ def batch(
             "in the output folder (needs isoconvert\\[render]).",
         ),
     ] = False,
+    read: ReadArgs = ReadArgs(),
+    mesh: MeshArgs = MeshArgs(),
+    post: PostArgs = PostArgs(),
+    memory: MemoryArgs = MemoryArgs(),
+    labels: LabelArgs = LabelArgs(),
 ) -> None:
     """Convert many volumes: files, folders (--recursive) and globs, in parallel."""
     _quiet_third_party()
@@ -1064,22 +1098,13 @@ def batch(
     from .report import parse_requirements
 
     required = parse_requirements(require)
-    writer = WRITERS.get(format)
-    check_attributes(writer, "--format", normals=normals, labels=single_file)
-    labels, wanted = _label_choice(labels, label, single_file, background, level)
-    post = _post_options(
-        close,
-        largest,
-        keep,
-        min_size,
-        min_volume,
-        fill_cavities,
-        smooth,
-        smooth_method,
-        passband,
-        decimate,
-        max_error,
+    writer = WRITERS.get(mesh.format or "ply")
+    check_attributes(writer, "--format", normals=mesh.normals, labels=labels.single_file)
+    # the raw layout goes to raw files only (plan); every other option to every file
+    options = _convert_options(
+        read, extract, mesh, post, labels, level, raw_layout=False, format=writer.name
     )
+    by_label = options.labels is not None
     batching.check_jobs(jobs)
     if previews:  # before the work: without a renderer there would be no pictures
         from .preview import require_renderer
@@ -1087,11 +1112,11 @@ def batch(
 
         require_renderer()
         check_contact_sheet(out_dir)  # and never over a page of the user's own
-    if not level and levels is None and not labels:
+    if not level and levels is None and not by_label:
         raise VolumeError("batch needs --level (a number or auto), --levels FILE or --labels")
     if out_dir.exists() and not out_dir.is_dir():
         raise VolumeError(f"{out_dir}: exists and is not a folder; choose another -o")
-    budget = _bytes(max_memory) if max_memory else _default_budget()
+    budget = _bytes(memory.max_memory) if memory.max_memory else _default_budget()
     early: list[Path] = []
     if summary is not None:  # a bad summary name fails now, not at the end
         if summary.suffix.lower() not in (".json", ".csv"):
@@ -1100,14 +1125,14 @@ def batch(
             early = batching.make_folders(summary.parent)  # inside -o, which batch makes
         try:
             # never over the --levels table or an input given as a file (a zarr.json)
-            read = [f for f in (levels, *map(Path, inputs)) if f is not None and f.is_file()]
-            check_output(summary, force or skip_existing, "summary.json", inputs=read)
+            given = [f for f in (levels, *map(Path, inputs)) if f is not None and f.is_file()]
+            check_output(summary, force or skip_existing, "summary.json", inputs=given)
         except IsoconvertError:
             batching.remove_empty_folders(early)
             raise
     rules = batching.read_mapping(levels) if levels else None
     found, skipped = batching.discover(
-        inputs, recursive=recursive, exclude=out_dir, images=images or method == "squares"
+        inputs, recursive=recursive, exclude=out_dir, images=images or extract.method == "squares"
     )
     batching.check_found(inputs, found, skipped)
     numeric_level = None
@@ -1116,17 +1141,6 @@ def batch(
 
         numeric_level = [lv if lv == "auto" else _level(lv) for lv in level]
         level_outputs(out_dir / "x", numeric_level)  # the same level twice is an error
-    common = {"spacing": _numbers(spacing, "--spacing")} if spacing else {}
-    if allow_outside_data:
-        common["allow_outside_data"] = True
-    if allow_missing_chunks:
-        common["allow_missing_chunks"] = True
-    raw = {
-        "shape": _numbers(shape, "--shape", int),
-        "dtype": dtype,
-        "endian": endian.value,
-        "header_bytes": header_bytes,
-    }
     work, outcomes = batching.plan(
         found,
         out_dir,
@@ -1135,39 +1149,24 @@ def batch(
         rules,
         skip_existing=skip_existing,
         force=force,
-        options=common,
-        raw_options={k: v for k, v in raw.items() if v is not None},
-        labels=labels,
+        raw_options=read.raw_layout(),
+        labels=by_label,
     )
     # a batch into its own input folder meets its earlier outputs: not inputs skipped
     written = [out_dir / "index.html"] if previews else []
     written += [summary] if summary is not None else []
     for item in batching.drop_outputs(skipped, work, outcomes, previews, written):
         outcomes.append(batching.Outcome(item.path, "", "skipped", message=item.reason))
-    from .convert import ConvertOptions
     from .distributed import scheduler_address
     from .extract.blocks import Blocks
 
     workers = batching.check_jobs(jobs, files=len(work))
+    # the files running at once share the budget
+    share = max(1, budget // workers) if budget else None
     settings = batching.BatchSettings(
-        ConvertOptions(
-            format=writer.name,
-            ascii=ascii,
-            flip=flip,
-            method=method,
-            vertex_offset=_vertex_offset(no_degenerate, exact_placement),
-            space=space,
-            normals=normals,
-            post=post,
-            labels=(wanted or ()) if labels else None,
-            single_file=single_file,
-            background=background,
-            label_smoothing=smooth,
-            # the files running at once share the budget
-            blocks=Blocks(max_memory=max(1, budget // workers) if budget else None),
-        ),
+        replace(options, blocks=Blocks(size=memory.block_size, max_memory=share)),
         tuple(required),
-        scheduler=scheduler_address(scheduler),
+        scheduler=scheduler_address(memory.scheduler),
         previews=previews,
     )
     created = early + (batching.make_folders(out_dir) if work else [])
@@ -1346,6 +1345,7 @@ def _print_batch_table(outcomes) -> None:
 
 
 @app.command(cls=_Command)
+@_grouped()
 def info(
     input: Annotated[str, typer.Argument(help="Volume file, folder of TIFF slices, or glob.")],
     as_json: Annotated[bool, _flag("--json", help="Print JSON instead of text.")] = False,
@@ -1368,25 +1368,10 @@ def info(
         ),
     ] = None,
     force: Annotated[bool, _flag("--force", "-f", help="Overwrite the --plot file.")] = False,
-    input_format: InputFormatOpt = None,
-    shape: ShapeOpt = None,
-    dtype: DtypeOpt = None,
-    endian: EndianOpt = Endian.little,
-    header_bytes: HeaderBytesOpt = 0,
-    channel: ChannelOpt = None,
-    spacing: SpacingOpt = None,
-    origin: OriginOpt = None,
-    allow_outside_data: AllowOutsideOpt = False,
-    scale: ScaleOpt = 0,
-    allow_missing_chunks: MissingChunksOpt = False,
-    key: KeyOpt = None,
-    volume_index: VolumeIndexOpt = None,
-    series: SeriesOpt = None,
+    read: ReadArgs = ReadArgs(),
 ) -> None:
     """Describe a volume (size, spacing, value range, histogram) and suggest isovalues."""
     _quiet_third_party()
-    from .readers import read_volume
-
     if plot is not None:
         from .infoplot import plot_format, require_matplotlib
 
@@ -1399,23 +1384,7 @@ def info(
         raise VolumeError("--level is for --plot (the contour drawn on the slices); add --plot")
     from .stats import histogram, no_levels_reason, suggested_levels, text_histogram
 
-    kwargs = _read_kwargs(
-        input_format,
-        shape,
-        dtype,
-        endian,
-        header_bytes,
-        channel,
-        spacing,
-        origin,
-        allow_outside_data,
-        scale,
-        allow_missing_chunks,
-        key,
-        volume_index,
-        series,
-    )
-    volume = read_volume(input, format=kwargs.pop("input_format"), **kwargs)
+    volume = read.read(input)
     hist = histogram(volume.samples)
     levels = suggested_levels(hist)  # empty when no level gives a surface
     if plot is not None:
