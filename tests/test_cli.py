@@ -250,8 +250,8 @@ def test_missing_output_folder(tmp_path, capsys):
 
 
 def test_unknown_output_extension_lists_formats(tmp_path, capsys):
-    code, _, err = run(capsys, "convert", SPHERE, "-l", 127.5, "-o", tmp_path / "o.vtk")
-    assert_one_line_error(code, err, "'.vtk'", "ply (.ply)", "obj (.obj)", "stl (.stl)")
+    code, _, err = run(capsys, "convert", SPHERE, "-l", 127.5, "-o", tmp_path / "o.xyz")
+    assert_one_line_error(code, err, "'.xyz'", "ply (.ply)", "obj (.obj)", "stl (.stl)")
     assert_no_output(tmp_path)
 
 

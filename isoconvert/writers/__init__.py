@@ -173,6 +173,72 @@ for _writer in (
         precision="float64",
         records_grid=True,
     ),
+    # formats without a native writer, written through meshio (isoconvert.writers.meshio):
+    # it needs the whole mesh in memory, so none of them streams
+    Writer(
+        "vtu",
+        "VTK XML UnstructuredGrid, via meshio; binary (meshio's text form rounds: no "
+        "--ascii); keeps normals, values (point data), labels (cell data)",
+        (".vtu",),
+        LazyFunction("isoconvert.writers.meshio:write_vtu"),
+        True,
+        _BOTH,
+        attributes=_ALL_ATTRIBUTES,
+    ),
+    Writer(
+        "vtk",
+        "legacy VTK UNSTRUCTURED_GRID, via meshio; binary (default) or --ascii; keeps "
+        "normals, values (point data), labels (cell data)",
+        (".vtk",),
+        LazyFunction("isoconvert.writers.meshio:write_vtk"),
+        True,
+        _BOTH,
+        attributes=_ALL_ATTRIBUTES,
+    ),
+    Writer(
+        "msh",
+        "Gmsh 2.2, via meshio; binary (meshio's text form is broken: no --ascii); keeps "
+        "normals, values ($NodeData), labels ($ElementData)",
+        (".msh",),
+        LazyFunction("isoconvert.writers.meshio:write_msh"),
+        True,
+        _BOTH,
+        attributes=_ALL_ATTRIBUTES,
+    ),
+    Writer(
+        "xdmf",
+        "XDMF 3, inline XML, via meshio (needs h5py); keeps normals, values (point data), "
+        "labels (cell data)",
+        (".xdmf", ".xmf"),
+        LazyFunction("isoconvert.writers.meshio:write_xdmf"),
+        False,
+        _BOTH,
+        attributes=_ALL_ATTRIBUTES,
+    ),
+    Writer(
+        "inp",
+        "Abaqus input, via meshio; text; triangles only, no attributes",
+        (".inp",),
+        LazyFunction("isoconvert.writers.meshio:write_inp"),
+        False,
+        _TRIANGLES,
+    ),
+    Writer(
+        "medit",
+        "Medit .mesh, via meshio; text; triangles only, no attributes",
+        (".mesh",),
+        LazyFunction("isoconvert.writers.meshio:write_medit"),
+        False,
+        _TRIANGLES,
+    ),
+    Writer(
+        "med",
+        "Salome MED (HDF5), via meshio (needs h5py); triangles only, no attributes",
+        (".med",),
+        LazyFunction("isoconvert.writers.meshio:write_med"),
+        False,
+        _TRIANGLES,
+    ),
 ):
     WRITERS.register(_writer.name, _writer)
 

@@ -225,6 +225,15 @@ def write_mesh(
     """
     writer = output_format(path, format)
     _check_cells(writer, mesh, path)
+    if not writer.streams and getattr(mesh, "slab_starts", None) is not None:
+        # a block-wise mesh that outgrew memory (extract.blocks.BlockMesh) lives in
+        # temporary files; a format written whole (meshio's) would read it all back in
+        streaming = ", ".join(n for n, w in WRITERS.items() if w.streams)
+        raise FormatError(
+            f"{path}: {writer.name} is written whole, but this mesh was built block-wise "
+            f"and moved to disk (larger than --max-memory allows); write {streaming}, or "
+            "raise --max-memory"
+        )
     stored = _stored(writer, mesh, on_status, expand=False)
     with atomic_output(path, force) as fh:
         writer.write(stored, fh, ascii or not writer.has_binary)
