@@ -100,215 +100,6 @@ ExamplesOpt = Annotated[
     int, typer.Option(help="Examples to list per kind of problem.", rich_help_panel="Checks")
 ]
 
-# Read options shared by convert and info
-InputFormatOpt = Annotated[
-    str | None,
-    typer.Option(
-        "--input-format",
-        help=f"Input format: {', '.join(READERS.names())}.",
-        rich_help_panel="Input",
-    ),
-]
-ShapeOpt = Annotated[
-    str | None,
-    typer.Option(
-        help="Raw: samples along x and y (and z), e.g. --shape 256 256 128.",
-        rich_help_panel="Input",
-    ),
-]
-DtypeOpt = Annotated[
-    str | None,
-    typer.Option(help="Raw: sample type (uint8, int16, float32, ...).", rich_help_panel="Input"),
-]
-EndianOpt = Annotated[Endian, typer.Option(help="Raw: byte order.", rich_help_panel="Input")]
-HeaderBytesOpt = Annotated[
-    int, typer.Option(help="Raw: bytes to skip before the samples.", rich_help_panel="Input")
-]
-ChannelOpt = Annotated[
-    int | None,
-    typer.Option(help="Multi-channel (RGB) images: channel to use.", rich_help_panel="Input"),
-]
-SpacingOpt = Annotated[
-    str | None,
-    typer.Option(
-        help="Override the spacing: x y (z), e.g. --spacing 0.5 0.5 2.", rich_help_panel="Input"
-    ),
-]
-AllowOutsideOpt = Annotated[
-    bool,
-    _flag(
-        "--allow-outside-data",
-        help="Let a header (detached NRRD) name data files outside its own folder.",
-        rich_help_panel="Input",
-    ),
-]
-KeyOpt = Annotated[
-    str | None,
-    typer.Option(
-        "--key",
-        help="NumPy .npz: the array to read (when it holds several).",
-        rich_help_panel="Input",
-    ),
-]
-VolumeIndexOpt = Annotated[
-    int | None,
-    typer.Option(
-        "--volume-index",
-        help="4D NIfTI: the volume to read (0 = the first).",
-        rich_help_panel="Input",
-    ),
-]
-ScaleOpt = Annotated[
-    int,
-    typer.Option(
-        help="OME-Zarr: resolution level to read (0 = full resolution).",
-        rich_help_panel="Input",
-    ),
-]
-MissingChunksOpt = Annotated[
-    bool,
-    _flag(
-        "--allow-missing-chunks",
-        help="Zarr: read chunks missing from the store as the fill value (stores whose "
-        "writer skips empty chunks; else a missing chunk is an error).",
-        rich_help_panel="Input",
-    ),
-]
-OriginOpt = Annotated[
-    str | None,
-    typer.Option(help="Override the origin: x y (z).", rich_help_panel="Input"),
-]
-
-SeriesOpt = Annotated[
-    str | None,
-    typer.Option(
-        "--series",
-        help="DICOM folder holding several series: the SeriesInstanceUID to read.",
-        rich_help_panel="Input",
-    ),
-]
-SpaceOpt = Annotated[
-    str | None,
-    typer.Option(
-        help="World frame of the mesh: lps (NRRD, DICOM, ITK) or ras (NIfTI); converts "
-        "from the frame the file states (default: keep it).",
-        rich_help_panel="Input",
-    ),
-]
-_POST = "Post-processing"
-CloseOpt = Annotated[
-    bool,
-    _flag(
-        "--close",
-        help="Cap the surface where the object meets the grid's faces, so it comes out "
-        "watertight (cubes).",
-        rich_help_panel=_POST,
-    ),
-]
-LargestOpt = Annotated[
-    bool, _flag("--largest", help="Keep only the largest component.", rich_help_panel=_POST)
-]
-KeepOpt = Annotated[
-    int | None,
-    typer.Option(help="Keep the K largest components (by triangles).", rich_help_panel=_POST),
-]
-MinSizeOpt = Annotated[
-    int | None,
-    typer.Option(help="Drop components of fewer than N triangles.", rich_help_panel=_POST),
-]
-MinVolumeOpt = Annotated[
-    float | None,
-    typer.Option(
-        help="Drop closed components enclosing less than V (world units cubed).",
-        rich_help_panel=_POST,
-    ),
-]
-FillCavitiesOpt = Annotated[
-    bool,
-    _flag(
-        "--fill-cavities",
-        help="Drop closed surfaces inside other closed surfaces (internal bubbles).",
-        rich_help_panel=_POST,
-    ),
-]
-SmoothOpt = Annotated[
-    int | None,
-    typer.Option(
-        help="Smoothing iterations (default 0: none; with --labels, relaxation iterations, "
-        "default 16); keeps the volume, grid-face vertices stay on it.",
-        rich_help_panel=_POST,
-    ),
-]
-SmoothMethodOpt = Annotated[
-    str,
-    typer.Option(
-        help="sinc (windowed sinc, as VTK), taubin, or laplacian (shrinks the surface).",
-        rich_help_panel=_POST,
-    ),
-]
-PassbandOpt = Annotated[
-    float,
-    typer.Option(
-        help="Smoothing pass band in (0, 2); smaller smooths more.", rich_help_panel=_POST
-    ),
-]
-DecimateOpt = Annotated[
-    float | None,
-    typer.Option(
-        help="Remove this fraction of the triangles, e.g. 0.9 (needs isoconvert\\[simplify]).",
-        rich_help_panel=_POST,
-    ),
-]
-MaxErrorOpt = Annotated[
-    float | None,
-    typer.Option(
-        help="Decimate moving the surface at most this far (world units); alone, as far as "
-        "it allows.",
-        rich_help_panel=_POST,
-    ),
-]
-LabelsOpt = Annotated[
-    bool,
-    _flag(
-        "--labels",
-        help="A label volume: one closed surface per label (Surface Nets), NAME_labelL.ply; "
-        "--smooth N sets its relaxation iterations (default 16).",
-        rich_help_panel="Labels",
-    ),
-]
-LabelOpt = Annotated[
-    str | None,
-    typer.Option(help="Only these labels, e.g. 3,7 (implies --labels).", rich_help_panel="Labels"),
-]
-SingleFileOpt = Annotated[
-    bool,
-    _flag(
-        "--single-file",
-        help="Labels: one mesh, each triangle with the labels on its two sides (PLY, VTP).",
-        rich_help_panel="Labels",
-    ),
-]
-BackgroundOpt = Annotated[
-    int, typer.Option(help="Labels: the value of no label.", rich_help_panel="Labels")
-]
-NormalsOpt = Annotated[
-    bool,
-    _flag(
-        "--normals",
-        help="Write per-vertex normals from the volume's gradient (PLY, OBJ, VTP, GLB).",
-        rich_help_panel="Output",
-    ),
-]
-SchedulerOpt = Annotated[
-    str | None,
-    typer.Option(
-        help="Run on a Dask cluster: its scheduler's address, e.g. tcp://host:8786 "
-        "(default: $DASK_SCHEDULER_ADDRESS; none: here). Needs isoconvert\\[dask].",
-        rich_help_panel="Large volumes",
-    ),
-]
-
-
 #: Set by :func:`main`: with --debug, third-party warnings and log lines stay visible.
 _show_third_party = False
 
@@ -399,15 +190,6 @@ def _numbers(text: str | None, name: str, kind=float) -> tuple | None:
         raise VolumeError(f"{name} takes numbers, e.g. {name} 1 1 2.5; got {text!r}") from None
 
 
-def _vertex_offset(no_degenerate: bool, exact: bool) -> float | None:
-    """--no-degenerate always offsets, --exact-placement never; neither: automatic (None)."""
-    if no_degenerate and exact:
-        raise typer.BadParameter("--no-degenerate and --exact-placement contradict each other")
-    if no_degenerate:
-        return NO_DEGENERATE_OFFSET
-    return 0.0 if exact else None
-
-
 @app.callback(invoke_without_command=True)
 def _main(
     version: Annotated[bool, _flag("--version", help="Show the version.")] = False,
@@ -450,32 +232,68 @@ ForceOpt = Annotated[bool, _flag("--force", "-f", help="Overwrite existing outpu
 
 # --- option groups -----------------------------------------------------------------------
 # Each group of options that convert and batch share is declared once, as the
-# fields of a dataclass whose types carry the typer option (help text, panel).
-# A command names a group as one parameter (``read: ReadArgs``); `_grouped`
-# spreads it into one option per field, so that `--help` lists them as before,
-# and gathers them back into one value when the command runs. Both commands
-# turn the groups into ConvertOptions through `_convert_options`, so a new
-# option is one field and one line there.
+# fields of a dataclass whose types carry the typer option (help text; the help
+# panel is the group's, in _GROUPS, unless the option names its own). A command
+# names a group as one parameter (``read: ReadArgs``, its default setting the
+# defaults); `_grouped` spreads it into one option per field, so that `--help`
+# lists them as before, and gathers them back into one value when the command
+# runs. Both commands turn the groups into ConvertOptions through
+# `_convert_options`, so a new option is one field and one line there (and
+# tests/test_cli_shared_options.py fails until both commands have it, or it is
+# listed there as one command's own).
 
 
 @dataclass(frozen=True)
 class ReadArgs:
-    """How to read a volume ("Input" panel): convert, batch, info; check, in part."""
+    """How to read a volume: convert, batch, info; check, in part."""
 
-    input_format: InputFormatOpt = None
-    shape: ShapeOpt = None
-    dtype: DtypeOpt = None
-    endian: EndianOpt = Endian.little
-    header_bytes: HeaderBytesOpt = 0
-    channel: ChannelOpt = None
-    spacing: SpacingOpt = None
-    origin: OriginOpt = None
-    allow_outside_data: AllowOutsideOpt = False
-    scale: ScaleOpt = 0
-    allow_missing_chunks: MissingChunksOpt = False
-    key: KeyOpt = None
-    volume_index: VolumeIndexOpt = None
-    series: SeriesOpt = None
+    input_format: Annotated[
+        str | None, typer.Option(help=f"Input format: {', '.join(READERS.names())}.")
+    ] = None
+    shape: Annotated[
+        str | None,
+        typer.Option(help="Raw: samples along x and y (and z), e.g. --shape 256 256 128."),
+    ] = None
+    dtype: Annotated[
+        str | None, typer.Option(help="Raw: sample type (uint8, int16, float32, ...).")
+    ] = None
+    endian: Annotated[Endian, typer.Option(help="Raw: byte order.")] = Endian.little
+    header_bytes: Annotated[int, typer.Option(help="Raw: bytes to skip before the samples.")] = 0
+    channel: Annotated[
+        int | None, typer.Option(help="Multi-channel (RGB) images: channel to use.")
+    ] = None
+    spacing: Annotated[
+        str | None, typer.Option(help="Override the spacing: x y (z), e.g. --spacing 0.5 0.5 2.")
+    ] = None
+    origin: Annotated[str | None, typer.Option(help="Override the origin: x y (z).")] = None
+    allow_outside_data: Annotated[
+        bool,
+        _flag(
+            "--allow-outside-data",
+            help="Let a header (detached NRRD) name data files outside its own folder.",
+        ),
+    ] = False
+    scale: Annotated[
+        int, typer.Option(help="OME-Zarr: resolution level to read (0 = full resolution).")
+    ] = 0
+    allow_missing_chunks: Annotated[
+        bool,
+        _flag(
+            "--allow-missing-chunks",
+            help="Zarr: read chunks missing from the store as the fill value (stores whose "
+            "writer skips empty chunks; else a missing chunk is an error).",
+        ),
+    ] = False
+    key: Annotated[
+        str | None, typer.Option(help="NumPy .npz: the array to read (when it holds several).")
+    ] = None
+    volume_index: Annotated[
+        int | None, typer.Option(help="4D NIfTI: the volume to read (0 = the first).")
+    ] = None
+    series: Annotated[
+        str | None,
+        typer.Option(help="DICOM folder holding several series: the SeriesInstanceUID to read."),
+    ] = None
 
     def read_options(self, raw_layout: bool = True):
         """The ReadOptions these options say (without the raw layout: shape,
@@ -565,6 +383,14 @@ class ExtractArgs:
         ),
     ] = False
 
+    def vertex_offset(self) -> float | None:
+        """--no-degenerate always offsets, --exact-placement never; neither: automatic (None)."""
+        if self.no_degenerate and self.exact_placement:
+            raise typer.BadParameter("--no-degenerate and --exact-placement contradict each other")
+        if self.no_degenerate:
+            return NO_DEGENERATE_OFFSET
+        return 0.0 if self.exact_placement else None
+
 
 @dataclass(frozen=True)
 class MeshArgs:
@@ -578,25 +404,83 @@ class MeshArgs:
         ),
     ] = None
     ascii: Annotated[bool, _flag("--ascii", help="Text PLY/STL/VTP instead of binary.")] = False
-    space: SpaceOpt = None
-    normals: NormalsOpt = False
+    space: Annotated[
+        str | None,
+        typer.Option(
+            help="World frame of the mesh: lps (NRRD, DICOM, ITK) or ras (NIfTI); converts "
+            "from the frame the file states (default: keep it).",
+            rich_help_panel="Input",
+        ),
+    ] = None
+    normals: Annotated[
+        bool,
+        _flag(
+            "--normals",
+            help="Write per-vertex normals from the volume's gradient (PLY, OBJ, VTP, GLB).",
+            rich_help_panel="Output",
+        ),
+    ] = False
 
 
 @dataclass(frozen=True)
 class PostArgs:
     """Post-processing: closing, clean-up, smoothing, decimation."""
 
-    close: CloseOpt = False
-    largest: LargestOpt = False
-    keep: KeepOpt = None
-    min_size: MinSizeOpt = None
-    min_volume: MinVolumeOpt = None
-    fill_cavities: FillCavitiesOpt = False
-    smooth: SmoothOpt = None
-    smooth_method: SmoothMethodOpt = "sinc"
-    passband: PassbandOpt = 0.1
-    decimate: DecimateOpt = None
-    max_error: MaxErrorOpt = None
+    close: Annotated[
+        bool,
+        _flag(
+            "--close",
+            help="Cap the surface where the object meets the grid's faces, so it comes out "
+            "watertight (cubes).",
+        ),
+    ] = False
+    largest: Annotated[bool, _flag("--largest", help="Keep only the largest component.")] = False
+    keep: Annotated[
+        int | None, typer.Option(help="Keep the K largest components (by triangles).")
+    ] = None
+    min_size: Annotated[
+        int | None, typer.Option(help="Drop components of fewer than N triangles.")
+    ] = None
+    min_volume: Annotated[
+        float | None,
+        typer.Option(help="Drop closed components enclosing less than V (world units cubed)."),
+    ] = None
+    fill_cavities: Annotated[
+        bool,
+        _flag(
+            "--fill-cavities",
+            help="Drop closed surfaces inside other closed surfaces (internal bubbles).",
+        ),
+    ] = False
+    smooth: Annotated[
+        int | None,
+        typer.Option(
+            help="Smoothing iterations (default 0: none; with --labels, relaxation iterations, "
+            "default 16); keeps the volume, grid-face vertices stay on it."
+        ),
+    ] = None
+    smooth_method: Annotated[
+        str,
+        typer.Option(
+            help="sinc (windowed sinc, as VTK), taubin, or laplacian (shrinks the surface)."
+        ),
+    ] = "sinc"
+    passband: Annotated[
+        float, typer.Option(help="Smoothing pass band in (0, 2); smaller smooths more.")
+    ] = 0.1
+    decimate: Annotated[
+        float | None,
+        typer.Option(
+            help="Remove this fraction of the triangles, e.g. 0.9 (needs isoconvert\\[simplify])."
+        ),
+    ] = None
+    max_error: Annotated[
+        float | None,
+        typer.Option(
+            help="Decimate moving the surface at most this far (world units); alone, as far as "
+            "it allows."
+        ),
+    ] = None
 
     def options(self):
         """The PostOptions these options say."""
@@ -626,8 +510,7 @@ class MemoryArgs:
         int | None,
         typer.Option(
             help="Extract block-wise, this many z-layers per block (default: as "
-            "--max-memory allows, and only for volumes larger than it).",
-            rich_help_panel="Large volumes",
+            "--max-memory allows, and only for volumes larger than it)."
         ),
     ] = None
     max_memory: Annotated[
@@ -635,21 +518,52 @@ class MemoryArgs:
         typer.Option(
             help="Memory for samples at once, e.g. 2G (default 1G; batch: 80% of what is "
             "available, shared by the files converted at once): a volume read from its "
-            "file that is larger is extracted block-wise.",
-            rich_help_panel="Large volumes",
+            "file that is larger is extracted block-wise."
         ),
     ] = None
-    scheduler: SchedulerOpt = None
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            help="Run on a Dask cluster: its scheduler's address, e.g. tcp://host:8786 "
+            "(default: $DASK_SCHEDULER_ADDRESS; none: here). Needs isoconvert\\[dask]."
+        ),
+    ] = None
+
+    def blocks(self):
+        """The Blocks of one conversion (convert; batch shares its budget out itself)."""
+        from .distributed import scheduler_address
+        from .extract.blocks import Blocks
+
+        return Blocks(
+            size=self.block_size,
+            max_memory=_bytes(self.max_memory) if self.max_memory else None,
+            scheduler=scheduler_address(self.scheduler),
+        )
 
 
 @dataclass(frozen=True)
 class LabelArgs:
     """Label volumes: one surface per label."""
 
-    labels: LabelsOpt = False
-    label: LabelOpt = None
-    single_file: SingleFileOpt = False
-    background: BackgroundOpt = 0
+    labels: Annotated[
+        bool,
+        _flag(
+            "--labels",
+            help="A label volume: one closed surface per label (Surface Nets), "
+            "NAME_labelL.ply; --smooth N sets its relaxation iterations (default 16).",
+        ),
+    ] = False
+    label: Annotated[
+        str | None, typer.Option(help="Only these labels, e.g. 3,7 (implies --labels).")
+    ] = None
+    single_file: Annotated[
+        bool,
+        _flag(
+            "--single-file",
+            help="Labels: one mesh, each triangle with the labels on its two sides (PLY, VTP).",
+        ),
+    ] = False
+    background: Annotated[int, typer.Option(help="Labels: the value of no label.")] = 0
 
     def chosen(self, level) -> tuple[int, ...] | None:
         """The labels wanted (empty: every label), or None for an isosurface."""
@@ -664,7 +578,15 @@ class LabelArgs:
         return (wanted or ()) if labels else None
 
 
-_GROUPS = (ReadArgs, ExtractArgs, MeshArgs, PostArgs, MemoryArgs, LabelArgs)
+#: The groups, and the help panel of their options (unless an option names its own).
+_GROUPS = {
+    ReadArgs: "Input",
+    ExtractArgs: None,
+    MeshArgs: None,
+    PostArgs: "Post-processing",
+    MemoryArgs: "Large volumes",
+    LabelArgs: "Labels",
+}
 _KEYWORD = inspect.Parameter.KEYWORD_ONLY
 
 
@@ -681,6 +603,9 @@ def _grouped(*omit: str):
                 params.append(param.replace(annotation=kind, kind=param.KEYWORD_ONLY))
                 continue
             types = get_type_hints(kind, include_extras=True)
+            for name in types:  # each option's panel, unless it names its own
+                option = types[name].__metadata__[0]
+                option.rich_help_panel = option.rich_help_panel or _GROUPS[kind]
             names = [f.name for f in fields(kind) if f.name not in omit]
             given = param.default  # the group's defaults (a command may set its own)
             params += [
@@ -729,7 +654,7 @@ def _convert_options(
         flip=extract.flip,
         ambiguity=extract.ambiguity.value if extract.ambiguity else None,
         axis=extract.axis.value if extract.axis else None,
-        vertex_offset=_vertex_offset(extract.no_degenerate, extract.exact_placement),
+        vertex_offset=extract.vertex_offset(),
         nan_as=extract.nan_as,
         format=mesh.format,
         ascii=mesh.ascii,
@@ -803,7 +728,7 @@ def convert(
         level,
         force=force,
         values=values,
-        blocks=_blocks(memory.block_size, memory.max_memory, memory.scheduler),
+        blocks=memory.blocks(),
     )
     by_label = options.labels is not None
     if not by_label and not level:
@@ -1200,18 +1125,6 @@ def batch(
         raise typer.Exit(1)
     if "check-failed" in statuses:
         raise typer.Exit(EXIT_CHECK_FAILED)
-
-
-def _blocks(size: int | None, max_memory: str | None, scheduler: str | None):
-    """The Blocks of --block-size, --max-memory and --scheduler."""
-    from .distributed import scheduler_address
-    from .extract.blocks import Blocks
-
-    return Blocks(
-        size=size,
-        max_memory=_bytes(max_memory) if max_memory else None,
-        scheduler=scheduler_address(scheduler),
-    )
 
 
 def _level(text: str) -> float:
