@@ -69,6 +69,139 @@ class Mesh:
             labels,
         )
 
+    # --- hand-offs to the mesh libraries users hold meshes in (imported lazily) ----------
+
+    def to_meshio(self):
+        """This mesh as a ``meshio.Mesh`` (needs meshio, a dependency of isoconvert).
+
+        Returns
+        -------
+        meshio.Mesh
+            ``points (V, 3) float64`` (the same vertices), one cell block
+            ``triangle`` ``(C, 3)`` (or ``line`` ``(C, 2)``) with the same
+            corner order, so the same orientation (int32 when there are fewer
+            than 2**31 vertices: meshio's Gmsh and PLY writers need it); point data ``Normals``
+            ``(V, 3)`` and ``value`` ``(V,)`` float32 and cell data
+            ``inside_label``, ``outside_label`` ``(C,)`` int32 (the label the
+            normals point from, and to) where the mesh has them.
+        """
+        meshio = _import("meshio", "meshio")
+        # int32 indices where they fit: meshio's Gmsh 4.1 writer makes unreadable files
+        # of int64 cells, and its PLY writer casts them down with a warning
+        index = np.int32 if len(self.vertices) < 2**31 else np.int64
+        kind = "triangle" if self.cells.shape[1] == 3 else "line"
+        return meshio.Mesh(
+            np.asarray(self.vertices, dtype=np.float64),
+            [(kind, np.asarray(self.cells, dtype=index))],
+            point_data=self._point_data(np.float32),
+            cell_data={k: [v] for k, v in self._cell_data().items()},
+        )
+
+    @classmethod
+    def from_meshio(cls, mesh, name: str = "meshio mesh") -> Mesh:
+        """A Mesh of the surface (or contour lines) of a ``meshio.Mesh``.
+
+        Triangles are taken as they are and quads split into two triangles
+        (0, 1, 2), (0, 2, 3), keeping their orientation; without either, line
+        cells are taken as contour segments. Volume cells (tetrahedra, ...)
+        and vertices are left out; a mesh of nothing else is an error.
+
+        Parameters
+        ----------
+        mesh : meshio.Mesh
+        name : str
+            Names the mesh in errors.
+
+        Returns
+        -------
+        Mesh
+            ``vertices (V, 3) float64`` (2D points get z = 0), ``cells (C, 3)``
+            or ``(C, 2)`` int64; ``normals`` from point data ``Normals`` (or
+            ``normals``), ``values`` from ``value``, ``cell_labels`` from cell
+            data ``inside_label`` and ``outside_label`` when present;
+            ``info["stored_precision"]`` "float32" for float32 points, else
+            "float64".
+
+        Raises
+        ------
+        FormatError
+            No surface or line cells, or a cell refers to a missing vertex.
+        """
+        from .errors import FormatError
+
+        points = np.asarray(mesh.points)
+        if points.ndim != 2 or points.shape[1] not in (2, 3):
+            raise FormatError(f"{name}: points are {points.shape}, not (V, 2) or (V, 3)")
+        precision = "float32" if points.dtype == np.float32 else "float64"
+        vertices = np.zeros((len(points), 3), dtype=np.float64)
+        vertices[:, : points.shape[1]] = points
+        kinds = [block.type for block in mesh.cells]
+        surface = [i for i, kind in enumerate(kinds) if kind in ("triangle", "quad")]
+        chosen = surface or [i for i, kind in enumerate(kinds) if kind == "line"]
+        if not chosen:
+            found = ", ".join(sorted(set(kinds))) or "no cells"
+            raise FormatError(
+                f"{name}: holds {found}, no triangles, quads or lines; isoconvert checks "
+                "surfaces and contours"
+            )
+        parts, rows = [], []
+        for i in chosen:
+            data = np.asarray(mesh.cells[i].data, dtype=np.int64)
+            if kinds[i] == "quad":  # two triangles each, the same turning sense
+                parts.append(
+                    np.stack([data[:, [0, 1, 2]], data[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
+                )
+                rows.append((i, 2))
+            else:
+                parts.append(data)
+                rows.append((i, 1))
+        cells = np.concatenate(parts) if len(parts) > 1 else parts[0]
+        if cells.size and (cells.min() < 0 or cells.max() >= len(vertices)):
+            bad = (cells < 0) | (cells >= len(vertices))
+            row = int(np.flatnonzero(bad.any(axis=1))[0])
+            raise FormatError(
+                f"{name}: cell {row} refers to vertex {int(cells[row][bad[row]][0])}, but there "
+                f"are {len(vertices)} vertices"
+            )
+
+        def per_cell(key: str) -> np.ndarray | None:
+            blocks = mesh.cell_data.get(key)
+            if blocks is None:
+                return None
+            return np.concatenate(
+                [np.repeat(np.asarray(blocks[i]).reshape(-1), times) for i, times in rows]
+            )
+
+        labels = None
+        inside, outside = per_cell("inside_label"), per_cell("outside_label")
+        if inside is not None and outside is not None:
+            labels = np.stack([inside, outside], axis=1).astype(np.int64)
+        normals = mesh.point_data.get("Normals", mesh.point_data.get("normals"))
+        if normals is not None:
+            normals = np.asarray(normals, dtype=np.float32).reshape(len(vertices), 3)
+        values = mesh.point_data.get("value")
+        if values is not None:
+            values = np.asarray(values, dtype=np.float32).reshape(len(vertices))
+        info = {"stored_precision": precision}
+        return cls(vertices, cells, None, info, normals, values, labels)
+
+    def _point_data(self, dtype) -> dict:
+        data = {}
+        if self.normals is not None:
+            data["Normals"] = np.asarray(self.normals, dtype=dtype)
+        if self.values is not None:
+            data["value"] = np.asarray(self.values, dtype=dtype)
+        return data
+
+    def _cell_data(self) -> dict:
+        if self.cell_labels is None:
+            return {}
+        labels = np.asarray(self.cell_labels, dtype=np.int32)
+        return {
+            "inside_label": np.ascontiguousarray(labels[:, 0]),
+            "outside_label": np.ascontiguousarray(labels[:, 1]),
+        }
+
     def triangle_normals(self) -> np.ndarray:
         """(C, 3) float64 unit normals (right-hand rule); zero for zero-area triangles."""
         v = self.vertices
@@ -108,6 +241,20 @@ class Mesh:
         c = v.mean(axis=0) if len(v) else np.zeros(3)
         a, b, d = v[t[:, 0]] - c, v[t[:, 1]] - c, v[t[:, 2]] - c
         return float(np.einsum("ij,ij->i", a, np.cross(b, d)).sum() / 6.0)
+
+
+def _import(module: str, package: str):
+    """``module``, or a one-line IsoconvertError saying how to install ``package``."""
+    import importlib
+
+    from .errors import IsoconvertError
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise IsoconvertError(
+            f"{package} is not installed (needed to hand the mesh over); pip install {package}"
+        ) from None
 
 
 def polylines(segments: np.ndarray) -> list[tuple[np.ndarray, bool]]:

@@ -1,4 +1,4 @@
-"""Reading mesh files (PLY, OBJ, OFF, STL, VTP, GLB, 3MF) for ``isoconvert check``.
+"""Reading mesh files (PLY, OBJ, OFF, STL, VTP, GLB, 3MF; VTU, VTK, MSH, ... through meshio).
 
 Every format is read here, with the standard library and numpy only (VTK and
 trimesh are test extras, never needed at run time), so that vertices and cells
@@ -11,6 +11,10 @@ blocks no further than their header declares, 3MF parts no further than their
 ZIP entry declares and never more than 100 times their compressed size (above
 16 MiB), counts in PLY, OFF, STL and GLB headers checked against the file's
 size first. A decompression bomb is a one-line FormatError.
+
+Every other surface format meshio reads (VTU, legacy VTK, Gmsh, XDMF, Abaqus,
+Medit, MED, ...: :data:`MESHIO_SUFFIXES`) is read through meshio
+(:mod:`.meshio`, imported only for those files).
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ from ..errors import FormatError, InputNotFoundError, one_line
 from ..mesh import Mesh
 from .common import _Unreadable
 from .glb import _read_glb
+from .meshio import MESHIO_SUFFIXES, _read_meshio
 from .obj import _read_obj
 from .off import _read_off
 from .ply import _read_ply
@@ -28,9 +33,12 @@ from .stl import _read_stl
 from .threemf import _read_3mf
 from .vtp import _read_vtp
 
-__all__ = ["MESH_SUFFIXES", "read_mesh"]
+__all__ = ["MESHIO_SUFFIXES", "MESH_SUFFIXES", "READ_SUFFIXES", "read_mesh"]
 
+#: What isoconvert's own readers read.
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl", ".vtp", ".glb", ".3mf")
+#: Everything read_mesh reads: its own formats, then meshio's others.
+READ_SUFFIXES = MESH_SUFFIXES + tuple(s for s in MESHIO_SUFFIXES if s not in MESH_SUFFIXES)
 
 #: The reader of each suffix.
 _READERS = {
@@ -45,7 +53,8 @@ _READERS = {
 
 
 def read_mesh(path: str | Path) -> Mesh:
-    """Read triangles, or contour segments, from a PLY, OBJ, OFF, STL, VTP, GLB or 3MF file.
+    """Read triangles, or contour segments, from a PLY, OBJ, OFF, STL, VTP, GLB or 3MF
+    file, or any surface file meshio reads (:data:`MESHIO_SUFFIXES`).
 
     Vertices and cells come back as the file holds them: PLY, OBJ, OFF, VTP,
     GLB and 3MF with the file's vertex order and indices (polygons split into
@@ -75,6 +84,10 @@ def read_mesh(path: str | Path) -> Mesh:
         without a grid record the report may judge boundaries against the
         bounding box (:func:`isoconvert.check_mesh`).
 
+    A meshio format's triangles (quads split in two), or its lines when it
+    has no faces, come back in the file's order (:meth:`Mesh.from_meshio`),
+    with ``stored_precision`` from its points' type.
+
     Raises
     ------
     InputNotFoundError
@@ -88,14 +101,14 @@ def read_mesh(path: str | Path) -> Mesh:
     if not path.is_file():
         raise InputNotFoundError(f"{path}: no such file")
     suffix = path.suffix.lower()
-    if suffix not in MESH_SUFFIXES:
+    if suffix not in READ_SUFFIXES:
         raise FormatError(
             f"{path}: unknown mesh extension {suffix or '(none)'!r}; "
-            f"check reads {', '.join(MESH_SUFFIXES)}"
+            f"check reads {', '.join(READ_SUFFIXES)}"
         )
     if path.stat().st_size == 0:
         raise FormatError(f"{path}: the file is empty (0 bytes); nothing to check")
-    reader = _READERS[suffix]
+    reader = _READERS.get(suffix, _read_meshio)
     try:
         return reader(path)
     except (

@@ -124,26 +124,18 @@ def meshio_mesh(mesh: Mesh, attributes: frozenset[str] = _ALL, float64: bool = F
         ``(C, 3)`` (``(C, 2)``) int64; point data ``Normals``, ``value``, cell
         data ``inside_label``, ``outside_label`` (int32) where present.
     """
-    meshio = import_meshio()
-    cells = np.asarray(mesh.cells, dtype=np.int64)
-    kind = "triangle" if cells.shape[1] == 3 else "line"
-    attribute = np.float64 if float64 else np.float32
-    point_data = {}
-    if "normals" in attributes and mesh.normals is not None:
-        point_data["Normals"] = np.asarray(mesh.normals, dtype=attribute)
-    if "values" in attributes and mesh.values is not None:
-        point_data["value"] = np.asarray(mesh.values, dtype=attribute)
-    cell_data = {}
-    if "labels" in attributes and mesh.cell_labels is not None:
-        labels = np.asarray(mesh.cell_labels, dtype=np.int32)
-        cell_data["inside_label"] = [np.ascontiguousarray(labels[:, 0])]
-        cell_data["outside_label"] = [np.ascontiguousarray(labels[:, 1])]
-    return meshio.Mesh(
-        np.asarray(mesh.vertices, dtype=np.float64),
-        [(kind, cells)],
-        point_data=point_data,
-        cell_data=cell_data,
+    import_meshio()
+    kept = Mesh(
+        mesh.vertices,
+        mesh.cells,
+        normals=mesh.normals if "normals" in attributes else None,
+        values=mesh.values if "values" in attributes else None,
+        cell_labels=mesh.cell_labels if "labels" in attributes else None,
     )
+    converted = kept.to_meshio()
+    if float64:
+        converted.point_data = {k: v.astype(np.float64) for k, v in converted.point_data.items()}
+    return converted
 
 
 def import_meshio():

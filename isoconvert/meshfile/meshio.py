@@ -1,0 +1,100 @@
+"""Mesh files read through meshio: the surface formats with no reader of isoconvert's own.
+
+VTU, legacy VTK, Gmsh MSH, XDMF, Abaqus INP, Medit, MED, Nastran, Exodus, ...:
+meshio reads them (imported on first use); :meth:`isoconvert.Mesh.from_meshio`
+takes their triangles (and quads, split in two), or their lines when there
+are no faces. The formats isoconvert reads itself (PLY, OBJ, OFF, STL, VTP,
+GLB, 3MF) stay with their own readers.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import warnings
+from pathlib import Path
+
+from ..errors import FormatError, one_line
+from ..mesh import Mesh
+
+#: suffix -> (meshio's format name, None: each of meshio's for the suffix in turn;
+#: the optional package it needs or None)
+FORMATS: dict[str, tuple[str | None, str | None]] = {
+    ".vtu": ("vtu", None),
+    ".vtk": ("vtk", None),
+    ".msh": (None, None),  # ANSYS (what meshio writes by default for .msh), then Gmsh
+    ".xdmf": ("xdmf", None),  # inline XML without h5py; HDF5 data needs it
+    ".xmf": ("xdmf", None),
+    ".inp": ("abaqus", None),
+    ".mesh": ("medit", None),
+    ".meshb": ("medit", None),
+    ".med": ("med", "h5py"),
+    ".bdf": ("nastran", None),
+    ".fem": ("nastran", None),
+    ".nas": ("nastran", None),
+    ".avs": ("avsucd", None),
+    ".mdpa": ("mdpa", None),
+    ".su2": ("su2", None),
+    ".ugrid": ("ugrid", None),
+    ".vol": ("netgen", None),
+    ".f3grid": ("flac3d", None),
+    ".tec": ("tecplot", None),
+    ".wkt": ("wkt", None),
+    ".e": ("exodus", "netCDF4"),
+    ".exo": ("exodus", "netCDF4"),
+    ".ex2": ("exodus", "netCDF4"),
+    ".cgns": ("cgns", "h5py"),
+    ".h5m": ("h5m", "h5py"),
+    ".hmf": ("hmf", "h5py"),
+}
+
+MESHIO_SUFFIXES = tuple(FORMATS)
+
+
+def _read_meshio(path: Path) -> Mesh:
+    """Read ``path`` with meshio (see :data:`FORMATS`).
+
+    Raises
+    ------
+    FormatError
+        meshio, or a package the format needs, is missing (the pip install
+        hint), or meshio cannot read the file (one line, no traceback).
+    """
+    file_format, needs = FORMATS[path.suffix.lower()]
+    what = path.suffix[1:].upper()
+    if needs is not None:
+        try:
+            __import__(needs)
+        except ImportError:
+            raise FormatError(
+                f"{path}: reading {what} needs the {needs} package; pip install {needs}"
+            ) from None
+    try:
+        import meshio
+    except ImportError:
+        raise FormatError(f"{path}: reading {what} needs meshio; pip install meshio") from None
+    try:
+        with (
+            warnings.catch_warnings(),
+            contextlib.redirect_stdout(io.StringIO()),  # meshio prints notes
+            contextlib.redirect_stderr(io.StringIO()),
+        ):
+            warnings.simplefilter("ignore")
+            read = meshio.read(path, file_format=file_format)
+    except ImportError as exc:  # a package meshio needs for this file (HDF5 in an XDMF)
+        package = getattr(exc, "name", None) or "a package"
+        raise FormatError(
+            f"{path}: reading this {what} needs the {package} package; pip install {package}"
+        ) from None
+    except SystemExit:  # meshio exits when no reader of the suffix takes the file
+        raise FormatError(f"{path}: not a readable {what} mesh") from None
+    except MemoryError:
+        raise
+    except OSError as exc:
+        raise FormatError(f"{path}: cannot read it ({exc.strerror or one_line(exc)})") from None
+    except Exception as exc:  # meshio's ReadError and whatever its parsers raise
+        why = one_line(exc) or type(exc).__name__
+        raise FormatError(f"{path}: not a readable {what} mesh ({why})") from None
+    mesh = Mesh.from_meshio(read, name=str(path))
+    mesh.info["source"] = str(path)
+    return mesh
