@@ -81,11 +81,15 @@ class Graph:
     packages : set of str
         Names of the modules that are packages.
     edges : list of Edge
+    external : dict of str to set of str
+        Module -> the top-level names of the packages outside this one it
+        imports (``numpy``, ``dask``), of any kind.
     """
 
     modules: dict[str, Path | None]
     packages: set[str]
     edges: list[Edge] = field(default_factory=list)
+    external: dict[str, set[str]] = field(default_factory=dict)
 
     def imports(self, kinds: tuple[str, ...] = ("top", "lazy", "typing")) -> dict[str, set[str]]:
         """Module -> the modules it imports (edges of the given kinds)."""
@@ -231,6 +235,9 @@ def build(root: str | Path) -> Graph:
                         continue  # a re-export: not an edge of this __init__
                     targets.append(base if alias.name == "*" else definer(base, alias.name))
             for target in targets:
+                if target.split(".")[0] != root.name:
+                    graph.external.setdefault(name, set()).add(target.split(".")[0])
+                    continue
                 while target and target not in modules:  # a name, not a module
                     target = target.rpartition(".")[0]
                 if target:

@@ -14,18 +14,16 @@ import json
 import os
 import time
 import tomllib
-from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from .convert import ConvertOptions, level_outputs
-from .errors import InputNotFoundError, IsoconvertError, OutputError
+from .errors import InputNotFoundError, IsoconvertError, OutputError, one_line
 from .quiet import silence_third_party
 from .readers import READERS, format_suffix, is_dicom_file, unsupported_format
 from .readers.stacks import TIFF_SUFFIXES, is_zarr_store, natural_key
-from .signals import run_in_worker, stop_workers_on_interrupt, worker_init
+from .runner import Finished, Task
 
 #: Bytes of working memory a conversion needs per byte of samples (a native-order
 #: or NaN-free copy at most, vertex and triangle arrays, the writer's records),
@@ -869,7 +867,7 @@ class BatchSettings:
         Checks each mesh must pass (``--require``).
     scheduler : str or None
         A Dask scheduler address (``tcp://host:8786``): each file is converted
-        by a task on that cluster (:func:`isoconvert.distributed.run_on_cluster`),
+        by a task on that cluster (:func:`run_on_cluster`),
         whose workers must see the inputs and the output folder at the same
         paths. None runs here, in worker processes.
     previews : bool
@@ -986,12 +984,14 @@ def run_jobs(
     partial files, and a worker whose parent died stops by itself.
 
     With ``settings.scheduler`` set, the jobs run on that Dask cluster instead
-    (:func:`isoconvert.distributed.run_on_cluster`; ``workers`` and
-    ``max_memory`` are then the cluster's business).
+    (:func:`run_on_cluster`; ``workers`` and ``max_memory`` are then the
+    cluster's business).
+
+    The files are tasks of the task runner (:func:`isoconvert.runner.local.run_in_processes`);
+    what a task's value means (an :class:`Outcome`) and which folders to tidy
+    are decided here.
     """
     if settings.scheduler:
-        from .distributed import run_on_cluster
-
         return run_on_cluster(settings.scheduler, jobs, settings, on_done)
     outcomes: list[Outcome] = []
 
@@ -1010,109 +1010,241 @@ def run_jobs(
                 raise
         return outcomes
 
-    import multiprocessing
+    from .runner.local import run_in_processes
 
-    budget = max_memory or (1 << 62)
-    pending = list(jobs)
-    context = multiprocessing.get_context("spawn")  # no fork of a threaded parent
     # Folders are made here, not in the workers: a worker removing the empty folder
     # of its failed file could otherwise pull it from under a neighbour writing there.
-    made: list[Path] = []
-
-    def tidy(busy) -> None:
-        writing = [Path(j.output).parent for j in busy]
-        remove_empty_folders(
-            [f for f in made if not any(w == f or w.is_relative_to(f) for w in writing)]
-        )
-        made[:] = [f for f in made if f.is_dir()]
-
+    files = _FileTasks(jobs, _run_one_dict, lambda job: (asdict(job), settings))
+    runs = run_in_processes(
+        files.tasks, workers, budget=max_memory, initializer=silence_third_party
+    )
     try:
-        while pending:
-            running: dict = {}
-            used = 0
-            try:
-                with (
-                    ProcessPoolExecutor(
-                        max_workers=workers,
-                        mp_context=context,
-                        initializer=worker_init,
-                        initargs=(silence_third_party,),
-                    ) as pool,
-                    stop_workers_on_interrupt(pool),  # not wait for their jobs to finish
-                ):
-                    while pending or running:
-                        while pending and len(running) < workers:
-                            job = pending[0]
-                            if running and used + job.estimate > budget:
-                                break
-                            pending.pop(0)
-                            try:
-                                made.extend(make_folders(Path(job.output).parent))
-                            except IsoconvertError as exc:
-                                done(Outcome(job.name, job.output, "failed", message=str(exc)))
-                                continue
-                            future = pool.submit(
-                                run_in_worker, _run_one_dict, asdict(job), settings
-                            )
-                            running[future] = job
-                            used += job.estimate
-                        if not running:
-                            continue
-                        finished, _ = wait(running, return_when=FIRST_COMPLETED)
-                        for future in finished:
-                            job = running[future]  # stays there if the pool broke: retried
-                            try:
-                                result = Outcome(**future.result())
-                            except BrokenProcessPool:
-                                raise
-                            except Exception as exc:
-                                result = Outcome(
-                                    job.name,
-                                    job.output,
-                                    "failed",
-                                    message=f"{job.name}: {type(exc).__name__}: {exc}",
-                                )
-                            del running[future]
-                            used -= job.estimate
-                            if result.status == "failed":
-                                tidy(running.values())
-                            done(result)
-            except BrokenProcessPool:
-                # A dead worker breaks the whole pool, and with it the jobs beside it.
-                # Run each of those alone: only the one that kills its worker fails.
-                for job in running.values():
-                    done(_run_alone(job, settings, context))
-            except KeyboardInterrupt:
-                for job in [*running.values(), *pending]:
-                    done(Outcome(job.name, job.output, "interrupted", message="interrupted"))
-                raise
+        for finished in runs:
+            job = files.finish(finished)
+            if not finished.started:  # its output folder could not be made
+                done(Outcome(job.name, job.output, "failed", message=str(finished.error)))
+                continue
+            if finished.died:
+                result = Outcome(
+                    job.name,
+                    job.output,
+                    "failed",
+                    message=f"{job.name}: the worker process died (out of memory?); "
+                    "convert it alone or lower --jobs",
+                )
+            elif finished.error is not None:
+                exc = finished.error
+                message = f"{job.name}: {type(exc).__name__}: {exc}"
+                result = Outcome(job.name, job.output, "failed", message=message)
+            else:
+                result = Outcome(**finished.value)
+            if result.status == "failed":
+                files.tidy()
+            done(result)
+    except KeyboardInterrupt as exc:
+        _stop(runs, exc)
+        for job in files.unfinished():
+            done(Outcome(job.name, job.output, "interrupted", message="interrupted"))
+        raise
     finally:
-        tidy([])
+        runs.close()
+        files.running.clear()
+        files.tidy()
     return outcomes
 
 
-def _run_alone(job: Job, settings: BatchSettings, context) -> Outcome:
-    """Run one job in a worker of its own; a worker that dies fails only this job."""
+def _stop(runs: Iterator, exc: KeyboardInterrupt) -> None:
+    """Pass an interrupt met here, between two results, to the runner (which
+    then stops its workers at once); one met there has closed it already."""
     try:
-        with (
-            ProcessPoolExecutor(
-                max_workers=1,
-                mp_context=context,
-                initializer=worker_init,
-                initargs=(silence_third_party,),
-            ) as pool,
-            stop_workers_on_interrupt(pool),
-        ):
-            future = pool.submit(run_in_worker, _run_one_dict, asdict(job), settings)
-            return Outcome(**future.result())
-    except BrokenProcessPool:
-        return Outcome(
-            job.name,
-            job.output,
-            "failed",
-            message=f"{job.name}: the worker process died (out of memory?); "
-            "convert it alone or lower --jobs",
+        runs.throw(exc)
+    except KeyboardInterrupt:
+        pass
+
+
+class _FileTasks:
+    """The files of a batch as tasks of the runner (:class:`isoconvert.runner.Task`),
+    which of them are running, and the output folders made for them.
+
+    A task's ``load`` makes the output folder of its file just before the file
+    starts (here, not in a worker: a worker removing the empty folder of its
+    failed file could pull it from under a neighbour writing there).
+
+    Parameters
+    ----------
+    jobs : list of Job
+    function : callable
+        What a worker runs.
+    arguments : callable
+        ``arguments(job)``: the task's arguments.
+    where : callable
+        ``where(job)``: the job as the workers see it (its output's folder is
+        made and tidied there).
+    key : callable
+        ``key(n)``: the task key of the n-th job.
+    """
+
+    def __init__(self, jobs, function, arguments, where=None, key=str) -> None:
+        self.jobs = list(jobs)
+        self.where = where or (lambda job: job)
+        self.made: list[Path] = []
+        self.running: list[Job] = []  # started, not finished, in the order they started
+        self._finished: set[int] = set()
+        self.tasks = [
+            Task(
+                function,
+                key=key(n),
+                what=job.input,
+                nbytes=job.estimate,
+                load=self._starter(job, arguments),
+                item=job,
+            )
+            for n, job in enumerate(self.jobs)
+        ]
+
+    def _starter(self, job: Job, arguments) -> Callable[[], tuple]:
+        def start() -> tuple:
+            self.made.extend(make_folders(Path(self.where(job).output).parent))
+            self.running.append(job)
+            return arguments(job)
+
+        return start
+
+    def finish(self, finished: Finished) -> Job:
+        """Note that ``finished``'s job is done; the job."""
+        job = finished.task.item
+        self._finished.add(id(job))
+        self.running = [j for j in self.running if j is not job]
+        return job
+
+    def unfinished(self) -> list[Job]:
+        """The jobs running, then those not started."""
+        started = {id(j) for j in self.running} | self._finished
+        return [*self.running, *(j for j in self.jobs if id(j) not in started)]
+
+    def tidy(self) -> None:
+        """Remove the folders made that are empty, but those a running job writes to."""
+        writing = [Path(self.where(j).output).parent for j in self.running]
+        remove_empty_folders(
+            [f for f in self.made if not any(w == f or w.is_relative_to(f) for w in writing)]
         )
+        self.made[:] = [f for f in self.made if f.is_dir()]
+
+
+def run_on_cluster(
+    address: str,
+    jobs: list[Job],
+    settings: BatchSettings,
+    on_done: Callable[[Outcome], None] | None = None,
+) -> list[Outcome]:
+    """Convert the files of a batch on the Dask cluster at ``address``, one task each.
+
+    The cluster's workers run :func:`run_one`; they must see the input files
+    and the output folder at the same paths (which are made absolute here;
+    outcomes name them as given). Output folders are made here before the
+    tasks are submitted, and those left empty by failed files are removed, as
+    :func:`run_jobs` does. The tasks are run by
+    :func:`isoconvert.runner.dask.run_as_completed`.
+
+    Parameters
+    ----------
+    address : str
+    jobs : list of Job
+    settings : BatchSettings
+        Sent to each task, without its scheduler (a file's blocks run on the
+        worker that converts it).
+    on_done : callable or None
+        Called with each outcome as its file finishes.
+
+    Returns
+    -------
+    list of Outcome
+        In the order the files finished. A file whose workers kept dying
+        fails alone, with a one-line message.
+
+    Raises
+    ------
+    IsoconvertError
+        As :func:`isoconvert.runner.dask.connect`.
+    KeyboardInterrupt
+        After reporting the files not finished as ``interrupted`` and
+        cancelling their tasks (one already running on a worker finishes,
+        its output written whole or not at all).
+    """
+    from .runner.dask import connect, new_token, run_as_completed
+
+    connect(address)  # an unreachable scheduler fails before any folder is made
+    options = settings.options
+    if options.blocks.scheduler is not None:
+        options = replace(options, blocks=replace(options.blocks, scheduler=None))
+    remote = replace(settings, options=options, scheduler=None)
+    token = new_token()
+    outcomes: list[Outcome] = []
+
+    def done(outcome: Outcome) -> None:
+        outcomes.append(outcome)
+        if on_done:
+            on_done(outcome)
+
+    def sent(job: Job) -> Job:
+        return replace(
+            job,
+            input=os.path.abspath(job.input),
+            output=os.path.abspath(job.output),
+            # the header records the input as given, as a local run does
+            options={**job.options, "source_name": job.input},
+        )
+
+    files = _FileTasks(
+        jobs,
+        run_one,
+        lambda job: (sent(job), remote),
+        where=sent,
+        key=lambda n: f"isoconvert-file-{token}-{n}",
+    )
+    runs = run_as_completed(address, files.tasks)
+    try:
+        for finished in runs:
+            job = files.finish(finished)
+            if not finished.started:  # its output folder could not be made
+                done(Outcome(job.name, job.output, "failed", message=str(finished.error)))
+                continue
+            outcome = _file_outcome(finished, job, sent(job))
+            if outcome.status == "failed":
+                files.tidy()
+            done(outcome)
+    except KeyboardInterrupt:
+        runs.close()  # cancels the tasks still running
+        for job in files.unfinished():
+            done(Outcome(job.name, job.output, "interrupted", message="interrupted"))
+        raise
+    finally:
+        runs.close()
+        files.running.clear()
+        files.tidy()
+    return outcomes
+
+
+def _file_outcome(finished: Finished, job: Job, sent: Job) -> Outcome:
+    """The outcome of one file's task on a cluster, naming the file as the user gave it."""
+
+    def failed(message: str) -> Outcome:
+        return Outcome(job.name, job.output, "failed", seconds=finished.seconds, message=message)
+
+    if isinstance(finished.error, IsoconvertError):
+        return failed(str(finished.error))
+    if finished.error is not None:  # a bug: report it for this file, keep the others going
+        exc = finished.error
+        return failed(f"{job.name}: internal error {type(exc).__name__}: {one_line(exc)}")
+    if finished.died:
+        return failed(
+            f"{job.name}: the Dask worker converting it died (out of memory?), also when "
+            "retried on other workers; give the workers more memory or convert it alone"
+        )
+    result = finished.value
+    result.message = result.message.replace(sent.input, job.input).replace(sent.output, job.output)
+    result.input, result.output = job.name, job.output
+    return result
 
 
 def check_jobs(jobs: int | None, files: int | None = None) -> int:

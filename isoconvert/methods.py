@@ -9,13 +9,15 @@ register under the entry-point group :data:`PLUGIN_GROUP` (see
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from .lazy import LazyFunction
 from .registry import Registry
 
 if TYPE_CHECKING:
-    from .extract import Extractor
+    from .mesh import Mesh
 
 PLUGIN_GROUP = "isoconvert.extractors"
 #: The vertex offset ``--no-degenerate`` uses: vertices keep a thousandth of
@@ -25,6 +27,42 @@ NO_DEGENERATE_OFFSET = 1e-3
 AMBIGUITY_RULES = ("separate-positive", "separate-negative")
 #: Rules for ambiguous squares: those of cubes, and the asymptotic decider.
 SQUARE_AMBIGUITY_RULES = (*AMBIGUITY_RULES, "asymptotic")
+
+
+# The record of a method lives here, with the table of them, so that the table
+# needs nothing of isoconvert.extract (which imports this module) to be typed.
+@dataclass(frozen=True)
+class Extractor:
+    """An isosurface (or isocontour) method.
+
+    Attributes
+    ----------
+    name : str
+    summary : str
+        One line for ``isoconvert methods``.
+    ndims : tuple of int
+        Volume dimensions it accepts.
+    run : callable
+        The function described in :mod:`isoconvert.extract`'s docstring.
+    ambiguity : tuple of str
+        Ambiguity rules it accepts (the first is its default).
+    options : frozenset of str
+        Extra keyword options it takes (e.g. ``axis``).
+    prepared : bool
+        It validates its input with :func:`~isoconvert.extract.prepare.prepare`,
+        which also resolves ``vertex_offset=None`` and records the offset used in
+        ``mesh.info``; its result is trusted. False (plugins): :func:`isoconvert.extract.extract`
+        resolves the offset beforehand and checks the result.
+    """
+
+    name: str
+    summary: str
+    ndims: tuple[int, ...]
+    run: Callable[..., Mesh]
+    ambiguity: tuple[str, ...] = (AMBIGUITY_RULES[0],)  # extract.tables.DEFAULT_AMBIGUITY
+    options: frozenset[str] = field(default_factory=frozenset)
+    prepared: bool = False
+
 
 EXTRACTORS: Registry[Extractor] = Registry(
     "extraction method",
@@ -50,6 +88,7 @@ EXTRACTORS.declare(
 __all__ = [
     "AMBIGUITY_RULES",
     "EXTRACTORS",
+    "Extractor",
     "NO_DEGENERATE_OFFSET",
     "PLUGIN_GROUP",
     "SQUARE_AMBIGUITY_RULES",

@@ -319,9 +319,9 @@ def test_results_come_in_order_and_the_window_is_bounded(address, monkeypatch):
     submitted = []
     submit = dd._submit
 
-    def counting(client, run, job, samples, token):
-        submitted.append(job.k0)
-        return submit(client, run, job, samples, token)
+    def counting(client, task, args):  # the runner's private _submit (issue 21)
+        submitted.append(args[0].k0)
+        return submit(client, task, args)
 
     monkeypatch.setattr(dd, "_submit", counting)
     for max_bytes, window in ((None, 4), (1, 2)):  # 2 threads; 1 byte: two slabs at most

@@ -20,13 +20,12 @@ method described by its docstring's first line). Built-in names win.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import IsoconvertError
 from ..mesh import Mesh
-from ..methods import EXTRACTORS, NO_DEGENERATE_OFFSET, PLUGIN_GROUP
+from ..methods import EXTRACTORS, NO_DEGENERATE_OFFSET, PLUGIN_GROUP, Extractor
 from ..volume import Volume
 from .blocks import BLOCK_METHODS, Blocks, extract_blocks
 from .cubes import marching_cubes
@@ -34,39 +33,6 @@ from .prepare import count_equal, resolve_vertex_offset
 from .squares import SQUARE_AMBIGUITY_RULES, marching_squares
 from .tables import AMBIGUITY_RULES, DEFAULT_AMBIGUITY
 from .tetra import marching_tetrahedra
-
-
-@dataclass(frozen=True)
-class Extractor:
-    """An isosurface (or isocontour) method.
-
-    Attributes
-    ----------
-    name : str
-    summary : str
-        One line for ``isoconvert methods``.
-    ndims : tuple of int
-        Volume dimensions it accepts.
-    run : callable
-        The function described in the module docstring.
-    ambiguity : tuple of str
-        Ambiguity rules it accepts (the first is its default).
-    options : frozenset of str
-        Extra keyword options it takes (e.g. ``axis``).
-    prepared : bool
-        It validates its input with :func:`~isoconvert.extract.prepare.prepare`,
-        which also resolves ``vertex_offset=None`` and records the offset used in
-        ``mesh.info``; its result is trusted. False (plugins): :func:`extract`
-        resolves the offset beforehand and checks the result.
-    """
-
-    name: str
-    summary: str
-    ndims: tuple[int, ...]
-    run: Callable[..., Mesh]
-    ambiguity: tuple[str, ...] = (DEFAULT_AMBIGUITY,)
-    options: frozenset[str] = field(default_factory=frozenset)
-    prepared: bool = False
 
 
 def _from_plugin(name: str, obj: object) -> Extractor:

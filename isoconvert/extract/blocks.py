@@ -14,29 +14,49 @@ the row of their lowest samples, so the slabs' vertices and cells, taken in z
 order, are the whole mesh's in the whole mesh's order: block-wise extraction
 gives the in-memory mesh bit for bit, whatever the slab thickness.
 
-The same :func:`run_block` runs on local threads and as a Dask task
-(:mod:`isoconvert.distributed`); :func:`stitch_blocks` merges results in
-either case.
+The same :func:`run_block` runs here (:func:`run_local`, the next slab read
+ahead by :func:`isoconvert.runner.local.read_ahead`) and as a task of a Dask
+cluster (:func:`dask_runner` hands the slabs to :func:`isoconvert.runner.run_in_order`);
+:func:`stitch_blocks` merges results in either case.
+
+Where a cluster's slabs are read:
+
+* a lazy grid that can be read out of order (a raw file, a TIFF stack) is
+  pickled with each task (its file's absolute path and layout, never the
+  samples) and every worker reads its own slab: the workers need the same
+  files at the same paths (a shared file system);
+* an in-memory array, or a grid best read in order by one process (a gzip
+  stream), is read here, slab by slab in z order, just before its task is
+  sent, and travels with it; the runner keeps the bytes in flight within the
+  memory budget.
+
+This module hands tasks to the runner and never imports its Dask code: the
+runner knows nothing of slabs, and the block engine nothing of Dask.
 """
 
 from __future__ import annotations
 
 import contextlib
+import copy
 import mmap
+import pickle
 import tempfile
+import uuid
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..atomic import DiskFullError, disk_full_error
-from ..errors import IsoconvertError
+from ..errors import IsoconvertError, one_line
 from ..grid import LazyGrid, SlabReader, grid_slab_zyx
 from ..memory import FileMap
 from ..mesh import Mesh
 from ..methods import NO_DEGENERATE_OFFSET
+from ..runner import Task, TaskFailure, cluster_size, run_in_order, worker_threads
+from ..runner.local import read_ahead
 from ..threads import kernel_threads
 from ..volume import ValueRange, Volume
 from .placement import Allocate, kernel_outputs, mesh_info, reversed_orientation
@@ -681,17 +701,14 @@ def run_local(
     def read(job: BlockJob) -> np.ndarray:
         return slabs.read(*job.read_range)
 
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="isoconvert-read") as reader:
-        ahead = None
-        for i, job in enumerate(jobs):
-            zyx = ahead.result() if ahead is not None else read(job)
-            following = jobs[i + 1] if i + 1 < len(jobs) else None
-            # read ahead, unless that decodes a new chunk row while this one is in use
-            ready = following is not None and slabs.ready(*following.read_range)
-            ahead = reader.submit(read, following) if ready else None
-            result = run_block(adjust(job) if adjust else job, zyx, allocate)
-            del zyx
-            yield result
+    def ready(job: BlockJob) -> bool:
+        # read ahead, unless that decodes a new chunk row while this one is in use
+        return slabs.ready(*job.read_range)
+
+    for job, zyx in read_ahead(jobs, read, ready):
+        result = run_block(adjust(job) if adjust else job, zyx, allocate)
+        del zyx
+        yield result
 
 
 Runner = Callable[[list[BlockJob]], Iterator[BlockResult]]
@@ -766,15 +783,12 @@ def extract_blocks(
     offset = 0.0 if auto or vertex_offset == 0 else check_vertex_offset(vertex_offset)
     arity = 2 if method == "squares" else 3
     if blocks.scheduler is not None:
-        from ..distributed import cluster_threads, connect, dask_runner
-
         runner: Runner | None = dask_runner(
             blocks.scheduler, source, volume.source, max_bytes=blocks.budget
         )
         if blocks.size is None:  # enough slabs to keep every thread of the cluster busy
             per_thread = -(
-                -volume.shape[2]
-                // (_SLABS_PER_THREAD * max(1, cluster_threads(connect(blocks.scheduler))))
+                -volume.shape[2] // (_SLABS_PER_THREAD * max(1, cluster_size(blocks.scheduler)))
             )
             layers = max(1, min(layers, per_thread))
             ranges = slab_ranges(volume.shape[2], layers)
@@ -830,6 +844,185 @@ def extract_blocks(
     return mesh
 
 
+# --- slabs as tasks of a cluster -----------------------------------------------------------------
+
+
+def extract_slab(job: BlockJob, samples: np.ndarray | LazyGrid) -> BlockResult | TaskFailure:
+    """One slab, as a task of a cluster: read it (unless sent), extract it.
+
+    Parameters
+    ----------
+    job : BlockJob
+        Its ``threads`` is replaced by :func:`isoconvert.runner.worker_threads`
+        (the mesh is the same for any number).
+    samples : LazyGrid or (layers, Y, X) array
+        The grid to read the slab from (on the worker), or the slab itself
+        (:func:`read_block` of ``job``, read by the client).
+
+    Returns
+    -------
+    BlockResult or TaskFailure
+        The result with its arrays; a failure for an ``IsoconvertError``.
+    """
+    try:
+        job = replace(job, threads=worker_threads())
+        if isinstance(samples, LazyGrid):
+            try:
+                zyx = read_block(samples, job)
+            except OSError as exc:
+                raise IsoconvertError(_unreadable(samples, job, exc)) from None
+        else:
+            zyx = samples
+        return run_block(job, zyx)
+    except IsoconvertError as exc:
+        return TaskFailure.of(exc)
+
+
+def _unreadable(grid: LazyGrid, job: BlockJob, exc: OSError) -> str:
+    import socket
+
+    lo, hi = job.read_range
+    reason = exc.strerror or one_line(exc)
+    return (
+        f"{getattr(grid, 'path', job.source)}: a Dask worker on {socket.gethostname()} cannot "
+        f"read z-layers {lo}..{hi - 1} ({reason}); the workers need the same files at the "
+        "same paths (a shared file system)"
+    )
+
+
+def _worker_side(source: np.ndarray | LazyGrid) -> LazyGrid | None:
+    """``source`` as workers should receive it when they can read their own
+    slabs (a grid read out of order, paths made absolute), else None."""
+    if not isinstance(source, LazyGrid) or source.sequential:
+        return None
+    grid = _absolute(source)
+    try:
+        pickle.dumps(grid)
+    except Exception:  # holds something a worker cannot receive: read here instead
+        return None
+    return grid
+
+
+def _absolute(grid: LazyGrid) -> LazyGrid:
+    """A copy of ``grid`` whose paths (attributes holding a Path, or a list or
+    tuple of them) are absolute: a worker's working folder is not ours."""
+    state = getattr(grid, "__dict__", {})
+    if not any(_relative_paths(v) for v in state.values()):
+        return grid
+    out = copy.copy(grid)
+    for name, value in state.items():
+        if isinstance(value, Path):
+            setattr(out, name, value.absolute())
+        elif isinstance(value, list | tuple) and any(isinstance(v, Path) for v in value):
+            fixed = [v.absolute() if isinstance(v, Path) else v for v in value]
+            setattr(out, name, type(value)(fixed) if isinstance(value, tuple) else fixed)
+    return out
+
+
+def _relative_paths(value: Any) -> bool:
+    if isinstance(value, Path):
+        return not value.is_absolute()
+    if isinstance(value, list | tuple):
+        return any(isinstance(v, Path) and not v.is_absolute() for v in value)
+    return False
+
+
+def _slab_bytes(source: np.ndarray | LazyGrid, job: BlockJob) -> int:
+    lo, hi = job.read_range
+    nx, ny, _ = source.shape
+    return (hi - lo) * nx * ny * np.dtype(source.dtype).itemsize
+
+
+SlabTask = Callable[[BlockJob, Any], Any]
+
+
+def dask_runner(
+    address: str,
+    source: np.ndarray | LazyGrid,
+    name: str,
+    task: SlabTask | None = None,
+    *,
+    max_bytes: int | None = None,
+) -> Runner:
+    """A runner of slab jobs on the Dask cluster at ``address``, for
+    :func:`extract_blocks`: each slab one :class:`~isoconvert.runner.Task`
+    of :func:`isoconvert.runner.run_in_order`.
+
+    Connects now (so an unreachable scheduler fails before any work); the
+    runner may then be called more than once (an extraction restarted with
+    another vertex offset).
+
+    Parameters
+    ----------
+    address : str
+        The scheduler.
+    source : (X, Y, Z) array or LazyGrid
+        The volume's samples (``Volume.samples``).
+    name : str
+        The volume's name, for messages.
+    task : callable or None
+        ``task(job, samples)`` run on a worker for each slab, ``samples`` being
+        the grid to read from or the slab itself; None is :func:`extract_slab`.
+        It must be picklable. For tests, which wrap it.
+    max_bytes : int or None
+        Bytes of slabs read here and sent with their tasks that may be in
+        flight at once (at least two slabs are); None is :data:`DEFAULT_MAX_MEMORY`.
+
+    Returns
+    -------
+    callable
+        ``runner(jobs)``: a generator of the jobs' :class:`BlockResult`, in
+        the order of ``jobs``. Closing it (done, failed or abandoned) cancels
+        the tasks still in flight.
+
+    Raises
+    ------
+    IsoconvertError
+        As :func:`isoconvert.runner.dask.connect`; and, from the generator, a
+        slab whose workers kept dying, the connection to the scheduler lost,
+        or an ``IsoconvertError`` of a task (its own type and message).
+    """
+    cluster_size(address)  # connect now: an unreachable scheduler fails before any work
+    grid = _worker_side(source)
+    run = task or extract_slab
+    budget = max_bytes or DEFAULT_MAX_MEMORY
+
+    def died(slab: Task) -> str:
+        job = slab.item
+        return (
+            f"{name}: a Dask worker died while extracting z-layers {job.k0}..{job.k1 - 1} "
+            "(out of memory?), also when retried on other workers; nothing was written. "
+            "Give the workers more memory, or lower --block-size"
+        )
+
+    def runner(jobs: list[BlockJob]) -> Iterator[BlockResult]:
+        token = uuid.uuid4().hex[:12]
+
+        def slab_task(job: BlockJob) -> Task:
+            key = f"isoconvert-slab-{token}-{job.k0}"
+            what = f"{name}: z-layers {job.k0}..{job.k1 - 1}"
+            if grid is not None:  # each worker reads its own slab
+                return Task(run, (job, grid), key=key, what=what, item=job)
+            return Task(  # read here just before it is sent, in z order
+                run,
+                key=key,
+                what=what,
+                nbytes=_slab_bytes(source, job),
+                load=lambda: (job, read_block(source, job)),
+                item=job,
+            )
+
+        return run_in_order(
+            address,
+            map(slab_task, jobs),
+            budget=budget,
+            died=died,
+            tail="; nothing was written",
+        )
+
+    return runner
+
+
 class _Restart(Exception):
     """A slab chose another vertex offset than the slabs before it."""
 
@@ -872,7 +1065,9 @@ __all__ = [
     "BlockResult",
     "Blocks",
     "MeshSink",
+    "dask_runner",
     "extract_blocks",
+    "extract_slab",
     "read_block",
     "run_block",
     "run_local",
