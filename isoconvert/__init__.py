@@ -5,6 +5,30 @@ The command line (``isoconvert``) is a thin shell over these functions.
 The public names are imported on first use (``isoconvert.read_volume``, or
 ``from isoconvert import convert``), so that ``import isoconvert`` and the
 command line's help do not pay for numpy and the extraction kernels.
+
+Layers (imports run one way, down; tests/test_layers.py fails on any import
+cycle among the modules and on a lower layer reaching up; ``python
+bench/import_graph.py`` prints the graph)::
+
+    cli.py                                      the shell: prints, exits, typer
+    batch.py  convert.py  label_convert.py      jobs: one file, many files
+    preview/  infoplot.py                       pictures
+    extract/  post/  writers/  readers/  meshfile/  report.py  attributes.py
+    runner/                                     tasks here or on Dask; knows no job
+    volume  mesh  grid  memory  methods  errors  registry  signals  ...   the model
+    _native                                     compiled kernels
+
+* ``extract/``, ``readers/``, ``writers/``, ``post/``, ``meshfile/`` and ``report.py``
+  never import ``cli``, ``batch``, ``convert``, ``label_convert`` or Dask code;
+  what two of them share (the grid description, chunked memory) is in the model.
+* The runner (:mod:`isoconvert.runner`) imports only the model; block-wise
+  extraction and batch hand it tasks, and only ``batch`` may import its Dask
+  engine directly. :mod:`isoconvert.distributed` is a forwarding module for
+  the engine's former names, above everything (nothing in the package imports it).
+* The model never imports a layer above it. A table of a layer that the CLI
+  lists without importing the layer (``methods``, the readers' and writers'
+  registries) names its entries by ``"module:attribute"`` strings, imported on
+  first use.
 """
 
 from __future__ import annotations

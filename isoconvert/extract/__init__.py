@@ -15,6 +15,20 @@ Third-party extractors register under the entry-point group
 ``isoconvert.extractors``: the entry point's name is the method name and it
 points to an :class:`Extractor` (or to a bare ``run`` function, taken as a 3D
 method described by its docstring's first line). Built-in names win.
+
+Layering (tests/test_layers.py checks it): this package sits beside
+``readers/``, ``writers/``, ``post/``, ``meshfile/`` and ``report.py``, above
+the model (``volume``, ``mesh``, ``grid``, ``memory``, ``methods``, ``errors``, the
+compiled kernels) and the task runner. What it shares with the writers and
+the report lives in the model: the grid description a mesh records is
+:func:`isoconvert.volume.grid_from_volume`, the chunked-memory helpers are
+:mod:`isoconvert.memory`. It never imports ``cli``, ``batch``, ``convert`` or
+``label_convert`` (not even lazily), nor the runner's Dask code
+(:mod:`isoconvert.runner.dask`, ``dask``, ``distributed``): block-wise
+extraction hands its slabs to the engine-neutral :mod:`isoconvert.runner`,
+which reaches a cluster on its behalf. :mod:`isoconvert.methods` holds the
+table of methods (and :class:`Extractor`) below this package, so that the CLI
+can list them without importing it.
 """
 
 from __future__ import annotations
