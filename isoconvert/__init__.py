@@ -50,6 +50,8 @@ _PUBLIC = {
     "EXTRACTORS": ".extract",
     "extract": ".extract",
     "Mesh": ".mesh",
+    "as_mesh": ".mesh",
+    "marching_cubes": ".arrays",
     "READERS": ".readers",
     "ReadOptions": ".readers",
     "read_volume": ".readers",
@@ -62,12 +64,13 @@ _PUBLIC = {
 }
 
 if TYPE_CHECKING:
+    from .arrays import marching_cubes
     from .attributes import vertex_normals, vertex_values
     from .convert import ConvertOptions, ConvertResult, convert
     from .errors import IsoconvertError
     from .extract import EXTRACTORS, extract
     from .extract.blocks import Blocks
-    from .mesh import Mesh
+    from .mesh import Mesh, as_mesh
     from .readers import READERS, ReadOptions, read_volume
     from .report import check_mesh
     from .volume import Volume
@@ -116,9 +119,11 @@ __all__ = [
     "ReadOptions",
     "Volume",
     "__version__",
+    "as_mesh",
     "check_mesh",
     "convert",
     "extract",
+    "marching_cubes",
     "read_volume",
     "vertex_normals",
     "vertex_values",

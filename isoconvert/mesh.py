@@ -185,6 +185,147 @@ class Mesh:
         info = {"stored_precision": precision}
         return cls(vertices, cells, None, info, normals, values, labels)
 
+    def to_trimesh(self):
+        """This triangle mesh as a ``trimesh.Trimesh`` (needs trimesh).
+
+        Built with ``process=False``: the same vertices in the same order
+        (nothing merged or dropped) and the same faces in the same corner
+        order, so the same orientation (trimesh's face normals and volume
+        follow the right-hand rule, as here).
+
+        Returns
+        -------
+        trimesh.Trimesh
+            ``vertices (V, 3) float64``, ``faces (C, 3) int64``; the mesh's
+            normals as ``vertex_normals``, its values as
+            ``vertex_attributes["value"]``, its labels as
+            ``face_attributes["inside_label"]`` and ``["outside_label"]``.
+
+        Raises
+        ------
+        IsoconvertError
+            trimesh is not installed, or the mesh is contour segments.
+        """
+        from .errors import IsoconvertError
+
+        if not self.is_triangles:
+            raise IsoconvertError(
+                "to_trimesh: the mesh is contour segments, and trimesh.Trimesh holds "
+                "triangles; use to_meshio (line cells) or to_pyvista"
+            )
+        trimesh = _import("trimesh", "trimesh")
+        vertex_attributes = {} if self.values is None else {"value": np.asarray(self.values)}
+        return trimesh.Trimesh(
+            vertices=np.asarray(self.vertices, dtype=np.float64),
+            faces=np.asarray(self.cells, dtype=np.int64),
+            vertex_normals=None if self.normals is None else np.asarray(self.normals),
+            vertex_attributes=vertex_attributes,
+            face_attributes=self._cell_data(),
+            process=False,
+            validate=False,
+        )
+
+    @classmethod
+    def from_trimesh(cls, mesh) -> Mesh:
+        """A Mesh of a ``trimesh.Trimesh``: its vertices and faces as they are.
+
+        Normals come along only where the Trimesh holds them already (given,
+        or computed before): none are computed here. ``vertex_attributes
+        ["value"]`` and ``face_attributes["inside_label"]``/``["outside_label"]``
+        become values and labels.
+
+        Returns
+        -------
+        Mesh
+            ``vertices (V, 3) float64``, ``cells (C, 3) int64``.
+        """
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        cells = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+        normals = None
+        # trimesh keeps given (or already computed) vertex normals in its cache; asking
+        # mesh.vertex_normals would compute them
+        cache = getattr(mesh, "_cache", None)
+        if cache is not None and "vertex_normals" in cache:
+            normals = np.asarray(mesh.vertex_normals, dtype=np.float32)
+        values = dict(getattr(mesh, "vertex_attributes", {}) or {}).get("value")
+        faces = dict(getattr(mesh, "face_attributes", {}) or {})
+        return cls._from_arrays(
+            vertices, cells, normals, values, faces.get("inside_label"), faces.get("outside_label")
+        )
+
+    def to_pyvista(self):
+        """This mesh as a ``pyvista.PolyData`` (needs pyvista).
+
+        Returns
+        -------
+        pyvista.PolyData
+            The same points and, in the same corner order, ``faces`` (or
+            ``lines`` for segments) in VTK's flat ``[3, a, b, c, ...]`` layout;
+            point data ``Normals`` and ``value``, cell data ``inside_label``
+            and ``outside_label`` where the mesh has them.
+        """
+        pyvista = _import("pyvista", "pyvista")
+        cells = np.asarray(self.cells, dtype=np.int64)
+        flat = np.column_stack([np.full(len(cells), cells.shape[1]), cells]).ravel()
+        points = np.asarray(self.vertices, dtype=np.float64)
+        if self.is_triangles:
+            out = pyvista.PolyData(points, faces=flat)
+        else:
+            out = pyvista.PolyData(points, lines=flat)
+        for name, data in self._point_data(np.float32).items():
+            out.point_data[name] = data
+        for name, data in self._cell_data().items():
+            out.cell_data[name] = data
+        return out
+
+    @classmethod
+    def from_pyvista(cls, mesh) -> Mesh:
+        """A Mesh of a ``pyvista.PolyData`` (other datasets: their surface,
+        ``extract_surface()``): its polygons as fans of triangles, or its lines
+        as segments when it has no polygons.
+
+        Returns
+        -------
+        Mesh
+            ``vertices (V, 3) float64``, ``cells (C, 3)`` or ``(C, 2)`` int64;
+            point data ``Normals`` and ``value``, cell data ``inside_label``
+            and ``outside_label`` where present.
+        """
+        from .errors import FormatError
+
+        if not hasattr(mesh, "faces"):
+            mesh = mesh.extract_surface()
+        vertices = np.asarray(mesh.points, dtype=np.float64)
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+        lines = np.asarray(getattr(mesh, "lines", np.empty(0)), dtype=np.int64)
+        if faces.size:
+            cells, source = _fans(faces, 3)
+        elif lines.size:
+            cells, source = _fans(lines, 2)
+        else:
+            raise FormatError("from_pyvista: the PolyData has no polygons or lines")
+        point_data, cell_data = mesh.point_data, mesh.cell_data
+
+        def per_cell(key):
+            return np.asarray(cell_data[key])[source] if key in cell_data else None
+
+        normals = point_data["Normals"] if "Normals" in point_data else None
+        values = point_data["value"] if "value" in point_data else None
+        return cls._from_arrays(
+            vertices, cells, normals, values, per_cell("inside_label"), per_cell("outside_label")
+        )
+
+    @classmethod
+    def _from_arrays(cls, vertices, cells, normals, values, inside, outside) -> Mesh:
+        labels = None
+        if inside is not None and outside is not None:
+            labels = np.stack([np.asarray(inside), np.asarray(outside)], axis=1).astype(np.int64)
+        if normals is not None:
+            normals = np.asarray(normals, dtype=np.float32).reshape(len(vertices), 3)
+        if values is not None:
+            values = np.asarray(values, dtype=np.float32).reshape(len(vertices))
+        return cls(vertices, cells, None, {}, normals, values, labels)
+
     def _point_data(self, dtype) -> dict:
         data = {}
         if self.normals is not None:
@@ -255,6 +396,60 @@ def _import(module: str, package: str):
         raise IsoconvertError(
             f"{package} is not installed (needed to hand the mesh over); pip install {package}"
         ) from None
+
+
+def _fans(flat: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """VTK's flat cell list ``[n, i0, ..., i(n-1), n, ...]`` as triangles (fans
+    ``(i0, ik, ik+1)``, keeping each polygon's turning sense) or as segments
+    (each polyline's consecutive pairs); and, for each, the cell it came from."""
+    out, source = [], []
+    at, cell = 0, 0
+    while at < len(flat):
+        n = int(flat[at])
+        ids = flat[at + 1 : at + 1 + n]
+        if size == 3:
+            for k in range(1, n - 1):
+                out.append((ids[0], ids[k], ids[k + 1]))
+                source.append(cell)
+        else:
+            for k in range(n - 1):
+                out.append((ids[k], ids[k + 1]))
+                source.append(cell)
+        at += n + 1
+        cell += 1
+    cells = np.array(out, dtype=np.int64).reshape(-1, size)
+    return cells, np.array(source, dtype=np.int64)
+
+
+def as_mesh(mesh: object) -> Mesh:
+    """An isoconvert Mesh of ``mesh``: a Mesh as it is, or a ``trimesh.Trimesh``,
+    a ``pyvista`` dataset or a ``meshio.Mesh`` converted (:meth:`Mesh.from_trimesh`,
+    :meth:`Mesh.from_pyvista`, :meth:`Mesh.from_meshio`). No library is imported:
+    an object of one can only exist when it is.
+
+    Raises
+    ------
+    IsoconvertError
+        Anything else.
+    """
+    import sys
+
+    from .errors import IsoconvertError
+
+    if isinstance(mesh, Mesh):
+        return mesh
+    for module, kinds, convert in (
+        ("trimesh", ("Trimesh",), Mesh.from_trimesh),
+        ("pyvista", ("DataSet",), Mesh.from_pyvista),
+        ("meshio", ("Mesh",), Mesh.from_meshio),
+    ):
+        library = sys.modules.get(module)
+        if library is not None and isinstance(mesh, tuple(getattr(library, k) for k in kinds)):
+            return convert(mesh)
+    raise IsoconvertError(
+        f"expected an isoconvert Mesh, a trimesh.Trimesh, a pyvista mesh or a meshio.Mesh, "
+        f"got {type(mesh).__name__}"
+    )
 
 
 def polylines(segments: np.ndarray) -> list[tuple[np.ndarray, bool]]:

@@ -78,7 +78,7 @@ from .graph import (
     mix64,
     row_groups,
 )
-from .mesh import Mesh
+from .mesh import Mesh, as_mesh
 from .threads import kernel_threads
 
 # the grid description belongs to the model (extraction records it too); offered here still
@@ -354,15 +354,17 @@ def _pos(p) -> list[float]:
 
 
 def check_mesh(
-    mesh: Mesh, *, examples: int = 5, source: str = "", grid: dict | None = None
+    mesh: Mesh | object, *, examples: int = 5, source: str = "", grid: dict | None = None
 ) -> Report:
     """Check a triangle mesh or a set of contour segments.
 
     Parameters
     ----------
-    mesh : Mesh
+    mesh : Mesh, trimesh.Trimesh, pyvista.PolyData or meshio.Mesh
         ``vertices (V, 3)``, ``cells (C, 3)`` or ``(C, 2)`` with indices in
-        ``0..V-1``. ``mesh.info["grid"]`` (extracted meshes carry it, files
+        ``0..V-1``; another library's mesh is taken as
+        :func:`isoconvert.mesh.as_mesh` converts it (the same vertices and
+        cells). ``mesh.info["grid"]`` (extracted meshes carry it, files
         written by isoconvert record it) tells the grid boundaries are judged
         against; ``mesh.info["stored_precision"]`` ("float32" or "float64")
         how precisely the positions were stored.
@@ -389,6 +391,7 @@ def check_mesh(
     IsoconvertError
         The arrays do not have the shapes above.
     """
+    mesh = as_mesh(mesh)
     name = source or str(mesh.info.get("source", "")) or "mesh"
     # C order for the kernels (no copy when it is already); int32 cells stay int32
     vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
