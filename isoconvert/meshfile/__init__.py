@@ -52,7 +52,7 @@ _READERS = {
 }
 
 
-def read_mesh(path: str | Path) -> Mesh:
+def read_mesh(path: str | Path, format: str | None = None) -> Mesh:
     """Read triangles, or contour segments, from a PLY, OBJ, OFF, STL, VTP, GLB or 3MF
     file, or any surface file meshio reads (:data:`MESHIO_SUFFIXES`).
 
@@ -66,6 +66,10 @@ def read_mesh(path: str | Path) -> Mesh:
     Parameters
     ----------
     path : str or Path
+        A mesh file, or ``-``: standard input (``format`` then required).
+    format : str or None
+        The format by its usual extension (``ply``, ``stl``, ``vtu``, ...),
+        instead of the file's suffix.
 
     Returns
     -------
@@ -97,10 +101,12 @@ def read_mesh(path: str | Path) -> Mesh:
         that refers to a vertex that does not exist (the message names the
         cell and the index).
     """
+    if str(path) == "-":
+        return _read_stdin(format)
     path = Path(path)
     if not path.is_file():
         raise InputNotFoundError(f"{path}: no such file")
-    suffix = path.suffix.lower()
+    suffix = _format_suffix(path, format)
     if suffix not in READ_SUFFIXES:
         raise FormatError(
             f"{path}: unknown mesh extension {suffix or '(none)'!r}; "
@@ -108,9 +114,9 @@ def read_mesh(path: str | Path) -> Mesh:
         )
     if path.stat().st_size == 0:
         raise FormatError(f"{path}: the file is empty (0 bytes); nothing to check")
-    reader = _READERS.get(suffix, _read_meshio)
+    reader = _READERS.get(suffix)
     try:
-        return reader(path)
+        return reader(path) if reader is not None else _read_meshio(path, suffix)
     except (
         _Unreadable,
         ValueError,
@@ -125,3 +131,38 @@ def read_mesh(path: str | Path) -> Mesh:
         raise FormatError(
             f"{path}: not a readable {suffix[1:].upper()} mesh ({one_line(exc)})"
         ) from None
+
+
+def _format_suffix(path: str | Path, format: str | None) -> str:
+    """The suffix that picks the reader: ``format`` (``ply`` or ``.ply``), else the file's."""
+    if format is None:
+        return Path(path).suffix.lower()
+    suffix = "." + format.lower().lstrip(".")
+    if suffix not in READ_SUFFIXES:
+        raise FormatError(
+            f"{path}: unknown mesh format {format!r}; check reads "
+            f"{', '.join(s[1:] for s in READ_SUFFIXES)}"
+        )
+    return suffix
+
+
+def _read_stdin(format: str | None) -> Mesh:
+    """A mesh piped to standard input: copied to a temporary file (the readers
+    map and seek their files), read as ``format``, the file removed."""
+    import os
+    import shutil
+    import sys
+    import tempfile
+
+    if not format:
+        raise FormatError("-: standard input has no extension to tell the format; give --format")
+    suffix = _format_suffix("-", format)
+    with tempfile.TemporaryDirectory(prefix="isoconvert-stdin-") as folder:
+        copy = Path(folder) / f"stdin{suffix}"
+        with open(copy, "wb") as out:
+            shutil.copyfileobj(sys.stdin.buffer, out, 1 << 20)
+        if os.path.getsize(copy) == 0:
+            raise FormatError("-: standard input is empty; nothing to check")
+        mesh = read_mesh(copy)
+    mesh.info["source"] = "-"
+    return mesh

@@ -17,12 +17,12 @@ from pathlib import Path
 from ..errors import FormatError, one_line
 from ..mesh import Mesh
 
-#: suffix -> (meshio's format name, None: each of meshio's for the suffix in turn;
-#: the optional package it needs or None)
-FORMATS: dict[str, tuple[str | None, str | None]] = {
+#: suffix -> (meshio's format name, or names tried in turn; the optional package it
+#: needs or None)
+FORMATS: dict[str, tuple[str | tuple[str, ...], str | None]] = {
     ".vtu": ("vtu", None),
     ".vtk": ("vtk", None),
-    ".msh": (None, None),  # ANSYS (what meshio writes by default for .msh), then Gmsh
+    ".msh": (("gmsh", "ansys"), None),  # meshio writes ANSYS for .msh by default
     ".xdmf": ("xdmf", None),  # inline XML without h5py; HDF5 data needs it
     ".xmf": ("xdmf", None),
     ".inp": ("abaqus", None),
@@ -51,8 +51,9 @@ FORMATS: dict[str, tuple[str | None, str | None]] = {
 MESHIO_SUFFIXES = tuple(FORMATS)
 
 
-def _read_meshio(path: Path) -> Mesh:
-    """Read ``path`` with meshio (see :data:`FORMATS`).
+def _read_meshio(path: Path, suffix: str | None = None) -> Mesh:
+    """Read ``path`` with meshio as the format of ``suffix`` (default: its own; see
+    :data:`FORMATS`).
 
     Raises
     ------
@@ -60,8 +61,9 @@ def _read_meshio(path: Path) -> Mesh:
         meshio, or a package the format needs, is missing (the pip install
         hint), or meshio cannot read the file (one line, no traceback).
     """
-    file_format, needs = FORMATS[path.suffix.lower()]
-    what = path.suffix[1:].upper()
+    suffix = (suffix or path.suffix).lower()
+    file_format, needs = FORMATS[suffix]
+    what = suffix[1:].upper()
     if needs is not None:
         try:
             __import__(needs)
@@ -80,7 +82,7 @@ def _read_meshio(path: Path) -> Mesh:
             contextlib.redirect_stderr(io.StringIO()),
         ):
             warnings.simplefilter("ignore")
-            read = meshio.read(path, file_format=file_format)
+            read = _read_as(meshio, path, file_format)
     except ImportError as exc:  # a package meshio needs for this file (HDF5 in an XDMF)
         package = getattr(exc, "name", None) or "a package"
         raise FormatError(
@@ -98,3 +100,17 @@ def _read_meshio(path: Path) -> Mesh:
     mesh = Mesh.from_meshio(read, name=str(path))
     mesh.info["source"] = str(path)
     return mesh
+
+
+def _read_as(meshio, path: Path, file_format: str | tuple[str, ...]):
+    """meshio's read of ``path`` as ``file_format``, or each of several in turn (the
+    error is the first one's)."""
+    if isinstance(file_format, str):
+        return meshio.read(path, file_format=file_format)
+    first = None
+    for name in file_format:
+        try:
+            return meshio.read(path, file_format=name)
+        except (Exception, SystemExit) as exc:  # noqa: BLE001 - the next format may read it
+            first = first or exc
+    raise first

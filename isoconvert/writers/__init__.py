@@ -297,6 +297,13 @@ def output_format(path: str | Path, format: str | None = None) -> Writer:
     """
     if format:
         return WRITERS.get(format)
+    from ..atomic import output_stream
+
+    if output_stream(path) is not None and not Path(path).suffix:
+        raise FormatError(
+            f"{path}: a stream has no extension to tell the format; give --format "
+            f"({', '.join(WRITERS.names())})"
+        )
     suffix = Path(path).suffix.lower()
     found = WRITERS.by_suffix(suffix)
     if found:
