@@ -590,6 +590,17 @@ _GROUPS = {
 _KEYWORD = inspect.Parameter.KEYWORD_ONLY
 
 
+@functools.cache
+def _group_types(kind: type) -> dict:
+    """The annotated types of a group's fields (evaluated once for all commands), each
+    option in its group's help panel unless it names its own."""
+    types = get_type_hints(kind, include_extras=True)
+    for annotated in types.values():
+        option = annotated.__metadata__[0]
+        option.rich_help_panel = option.rich_help_panel or _GROUPS[kind]
+    return types
+
+
 def _grouped(*omit: str):
     """Spread a command's option-group parameters into typer options, one per field
     (but those named in ``omit``), and gather them back when the command runs."""
@@ -602,10 +613,7 @@ def _grouped(*omit: str):
             if kind not in _GROUPS:
                 params.append(param.replace(annotation=kind, kind=param.KEYWORD_ONLY))
                 continue
-            types = get_type_hints(kind, include_extras=True)
-            for name in types:  # each option's panel, unless it names its own
-                option = types[name].__metadata__[0]
-                option.rich_help_panel = option.rich_help_panel or _GROUPS[kind]
+            types = _group_types(kind)
             names = [f.name for f in fields(kind) if f.name not in omit]
             given = param.default  # the group's defaults (a command may set its own)
             params += [
