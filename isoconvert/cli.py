@@ -1,5 +1,11 @@
 """Command line: a thin shell over the Python API (the only module using typer/rich).
 
+The top layer: it imports the library, nothing imports it. The help, ``formats``
+and ``methods`` need only numpy-free tables; each command imports the rest when
+it runs. The options ``convert`` and ``batch`` share are declared once, in
+groups (``ReadArgs``, ``ExtractArgs``, ...), and both commands build their
+:class:`~isoconvert.convert.ConvertOptions` from them through one function.
+
 Exit codes: 0 success, 1 a problem with the input or output (one line on
 stderr), 2 a usage error, 3 an internal error (a bug), 4 a check named by
 ``--require`` failed, 130 interrupted.
