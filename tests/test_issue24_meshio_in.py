@@ -184,3 +184,12 @@ def test_an_unknown_suffix_names_every_format_read(tmp_path):
     path.write_text("x")
     with pytest.raises(FormatError, match=r"check reads .*\.ply.*\.vtu.*\.msh"):
         read_mesh(path)
+
+
+def test_an_xdmf_with_hdf5_data_without_h5py_is_the_install_hint(torus, tmp_path, monkeypatch):
+    pytest.importorskip("h5py")
+    path = tmp_path / "m.xdmf"
+    meshio.write(path, meshio.Mesh(torus.vertices, [("triangle", torus.cells)]))  # HDF5 data
+    assert read_mesh(path).n_cells == torus.n_cells
+    monkeypatch.setitem(sys.modules, "h5py", None)
+    one_line_error(*run("check", str(path)), "needs the h5py package; pip install h5py")

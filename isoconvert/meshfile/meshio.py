@@ -75,10 +75,11 @@ def _read_meshio(path: Path, suffix: str | None = None) -> Mesh:
         import meshio
     except ImportError:
         raise FormatError(f"{path}: reading {what} needs meshio; pip install meshio") from None
+    printed = io.StringIO()
     try:
         with (
             warnings.catch_warnings(),
-            contextlib.redirect_stdout(io.StringIO()),  # meshio prints notes
+            contextlib.redirect_stdout(printed),  # meshio prints notes, and its read errors
             contextlib.redirect_stderr(io.StringIO()),
         ):
             warnings.simplefilter("ignore")
@@ -88,8 +89,11 @@ def _read_meshio(path: Path, suffix: str | None = None) -> Mesh:
         raise FormatError(
             f"{path}: reading this {what} needs the {package} package; pip install {package}"
         ) from None
-    except SystemExit:  # meshio exits when no reader of the suffix takes the file
-        raise FormatError(f"{path}: not a readable {what} mesh") from None
+    except SystemExit:  # meshio prints why a reader failed, then exits
+        lines = [line.strip() for line in printed.getvalue().splitlines()]
+        why = next((x for x in lines if x and not x.startswith("Error: Couldn't read")), "")
+        told = f" ({one_line(why)})" if why else ""
+        raise FormatError(f"{path}: not a readable {what} mesh{told}") from None
     except MemoryError:
         raise
     except OSError as exc:
