@@ -186,3 +186,20 @@ def test_a_text_form_meshio_does_not_give_back_is_refused(torus, tmp_path, suffi
     with pytest.raises(FormatError, match=f"{why}.*; leave out --ascii"):
         write_mesh(torus, tmp_path / f"t{suffix}", ascii=True)
     assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("name", ["vtu", "vtk", "msh", "inp"])
+def test_the_report_on_what_is_written_is_the_report_on_the_file(tmp_path, name):
+    """convert --report judges stored_mesh(mesh, format): for an open mesh (a sphere
+    cut by the grid) it must say what check of the file says, and meshio's files
+    cannot record that a grid cut the mesh (isoconvert's own headers do)."""
+    from isoconvert import check_mesh
+    from isoconvert.meshfile import read_mesh
+    from isoconvert.writers import stored_mesh
+
+    mesh = extract(read_volume(SAMPLES / "sphere.nrrd"), 60.5)
+    path = write_mesh(mesh, tmp_path / f"cut{MESHIO_WRITERS[name][0]}")
+    on_file = check_mesh(read_mesh(path), source="m").to_dict()
+    on_stored = check_mesh(stored_mesh(mesh, name), source="m").to_dict()
+    assert on_stored == on_file
+    assert on_file["checks"]["no-holes"] is False  # no record: every open edge is a hole

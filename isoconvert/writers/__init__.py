@@ -57,6 +57,10 @@ class Writer:
     streams: bool = False
     #: attributes it stores: "normals", "values" (per vertex), "labels" (per cell)
     attributes: frozenset[str] = frozenset()
+    #: whether the file says isoconvert wrote it (a header comment, STL's 80 bytes),
+    #: which the mesh readers take as the record that a grid cut the mesh; meshio's
+    #: formats have no place isoconvert can write that in
+    records_source: bool = True
 
 
 WRITERS: Registry[Writer] = Registry("output format")
@@ -184,6 +188,7 @@ for _writer in (
         True,
         _BOTH,
         attributes=_ALL_ATTRIBUTES,
+        records_source=False,
     ),
     Writer(
         "vtk",
@@ -194,6 +199,7 @@ for _writer in (
         True,
         _BOTH,
         attributes=_ALL_ATTRIBUTES,
+        records_source=False,
     ),
     Writer(
         "msh",
@@ -204,6 +210,7 @@ for _writer in (
         True,
         _BOTH,
         attributes=_ALL_ATTRIBUTES,
+        records_source=False,
     ),
     Writer(
         "xdmf",
@@ -214,6 +221,7 @@ for _writer in (
         False,
         _BOTH,
         attributes=_ALL_ATTRIBUTES,
+        records_source=False,
     ),
     Writer(
         "inp",
@@ -222,6 +230,7 @@ for _writer in (
         LazyFunction("isoconvert.writers.meshio:write_inp"),
         False,
         _TRIANGLES,
+        records_source=False,
     ),
     Writer(
         "medit",
@@ -230,6 +239,7 @@ for _writer in (
         LazyFunction("isoconvert.writers.meshio:write_medit"),
         False,
         _TRIANGLES,
+        records_source=False,
     ),
     Writer(
         "med",
@@ -238,6 +248,7 @@ for _writer in (
         LazyFunction("isoconvert.writers.meshio:write_med"),
         False,
         _TRIANGLES,
+        records_source=False,
     ),
 ):
     WRITERS.register(_writer.name, _writer)

@@ -95,9 +95,11 @@ def _stored(
         with np.errstate(over="ignore", invalid="ignore"):
             vertices = vertices.astype(np.float32).astype(np.float64)
     info = {k: v for k, v in mesh.info.items() if k not in ("grid", "stored_precision")}
-    # every file isoconvert writes says so (a header comment, STL's 80 bytes), and the
-    # mesh readers take that as the record that a grid cut the mesh (check_mesh)
-    info["cut_by_grid"] = True
+    # every file isoconvert writes itself says so (a header comment, STL's 80 bytes), and
+    # the mesh readers take that as the record that a grid cut the mesh (check_mesh);
+    # meshio's formats cannot: a report on them is a report on a file without it
+    if writer.records_source:
+        info["cut_by_grid"] = True
     if writer.records_grid:
         grid = normalized_grid(mesh.info.get("grid"))
         if grid is not None:
