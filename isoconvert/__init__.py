@@ -10,7 +10,7 @@ Layers (imports run one way, down; tests/test_layers.py fails on any import
 cycle among the modules and on a lower layer reaching up; ``python
 bench/import_graph.py`` prints the graph)::
 
-    cli.py                                      the shell: prints, exits, typer
+    cli/                                        the shell: prints, exits, typer
     batch.py  convert.py  label_convert.py      jobs: one file, many files
     preview/  infoplot.py                       pictures
     extract/  post/  writers/  readers/  meshfile/  report.py  attributes.py

@@ -1,0 +1,290 @@
+"""Command line: a thin shell over the Python API (the only package using typer/rich).
+
+The top layer: it imports the library, nothing imports it. The help, ``formats``
+and ``methods`` need only numpy-free tables; each command imports the rest when
+it runs. The options ``convert`` and ``batch`` share are declared once, in
+groups (``ReadArgs``, ``ExtractArgs``, ...), and both commands build their
+:class:`~isoconvert.convert.ConvertOptions` from them through one function.
+
+Its modules, each importing only those listed before it (so no circle):
+
+- ``options``: the option groups and the options several commands take;
+- ``display``: progress, the stage clock, notices and batch's table;
+- ``reports``: mesh reports printed or written, exit code 4;
+- ``convert_cmd``, ``batch_cmd``, ``inspect_cmds``: the commands, plain functions;
+- this ``__init__``: the typer ``app``, on which it registers the commands (in the
+  order ``--help`` lists them), ``main`` with its error handling and exit codes,
+  the command-line pre-processing, and ``run`` (the console script).
+
+Exit codes: 0 success, 1 a problem with the input or output (one line on
+stderr), 2 a usage error, 3 an internal error (a bug), 4 a check named by
+``--require`` failed, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import sys
+from contextlib import nullcontext, redirect_stdout
+from typing import Annotated
+
+import typer
+
+from .. import __version__
+from ..errors import IsoconvertError, one_line
+from . import display
+from .batch_cmd import batch
+from .convert_cmd import convert
+from .inspect_cmds import check, formats, info, methods, preview, warmup
+from .options import (
+    EXIT_CHECK_FAILED,
+    ExtractArgs,
+    LabelArgs,
+    MemoryArgs,
+    MeshArgs,
+    PostArgs,
+    ReadArgs,
+    _flag,
+)
+
+__all__ = [
+    "EXIT_CHECK_FAILED",
+    "REPORT_SUFFIXES",
+    "ExtractArgs",
+    "LabelArgs",
+    "MemoryArgs",
+    "MeshArgs",
+    "PostArgs",
+    "ReadArgs",
+    "app",
+    "gather_multi_values",
+    "main",
+    "run",
+]
+
+
+# What the help, `formats` and `methods` need comes from numpy-free tables
+# (methods, checks, and the readers' and writers' registries); each command
+# imports the rest (numpy, the kernels, the parsers) when it runs, so that
+# `isoconvert --help` starts fast.
+
+
+class _HelpAsFlag:
+    """Show ``--help`` as a flag, as our own flags (typer would show ``-h <bool>``)."""
+
+    def get_help_option(self, ctx):
+        option = super().get_help_option(ctx)
+        if option is not None:
+            option.metavar = ""
+            # Absent, typer's help option is None, which typer coerces through
+            # pydantic (~50 ms to import); False is a bool, which it passes as
+            # is, so `formats` and `methods` need no pydantic.
+            option.default = False
+        return option
+
+
+class _Command(_HelpAsFlag, typer.core.TyperCommand):
+    pass
+
+
+class _Group(_HelpAsFlag, typer.core.TyperGroup):
+    pass
+
+
+app = typer.Typer(
+    name="isoconvert",
+    cls=_Group,
+    help="Turn scalar volumes and images (raw, NRRD, TIFF, Zarr, DICOM, NIfTI, MetaImage, NumPy, "
+    "PNG, JPEG) into isosurface meshes and contours (PLY, OBJ, OFF, VTP, STL, GLB, 3MF, SVG, "
+    "GeoJSON), and check and picture meshes.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+@app.callback(invoke_without_command=True)
+def _main(
+    version: Annotated[bool, _flag("--version", help="Show the version.")] = False,
+    debug: Annotated[
+        bool, _flag("--debug", help="Show tracebacks (may go anywhere on the line).")
+    ] = False,
+) -> None:
+    if version:
+        print(f"isoconvert {__version__}")
+        raise typer.Exit()
+
+
+# The commands, in the order --help lists them.
+app.command(cls=_Command)(convert)
+app.command(cls=_Command)(check)
+app.command(cls=_Command)(preview)
+app.command(cls=_Command)(batch)
+app.command(cls=_Command)(info)
+app.command(cls=_Command, hidden=True)(warmup)
+app.command(cls=_Command)(formats)
+app.command(cls=_Command)(methods)
+
+
+#: File names that a bare ``--report`` takes as its value (other names after it are
+#: read as inputs; ``--report=NAME`` takes any).
+REPORT_SUFFIXES = (".json", ".txt")
+
+
+# Options that take several numbers; `--shape 256 256 128` is gathered into one
+# value before typer sees it (click options have a fixed number of values, and
+# --shape takes 2 or 3).
+_MULTI_VALUE = ("--shape", "--spacing", "--origin")
+
+
+def gather_multi_values(argv: list[str]) -> list[str]:
+    """Join ``--shape 256 256 128`` into ``--shape 256,256,128`` (also spacing,
+    origin), and give convert's bare ``--report`` the value "-" (print) unless a
+    ``.json`` or ``.txt`` file name follows it (check's ``--report`` always takes
+    the next word)."""
+    out: list[str] = []
+    command = next((a for a in argv if not a.startswith("-")), None)
+    i = 0
+    while i < len(argv):
+        token = argv[i]
+        out.append(token)
+        i += 1
+        if token == "--report" and command == "convert":
+            if i < len(argv) and argv[i].lower().endswith(REPORT_SUFFIXES):
+                out.append(argv[i])
+                i += 1
+            else:
+                out.append("-")
+            continue
+        if token in _MULTI_VALUE:
+            values = []
+            while i < len(argv) and len(values) < 3 and _is_number(argv[i]):
+                values.append(argv[i])
+                i += 1
+            if values:
+                out.append(",".join(values))
+    return out
+
+
+#: options whose value is a file isoconvert writes
+_OUTPUT_OPTIONS = ("-o", "--output", "--report", "--plot", "--preview", "--summary")
+
+
+def _writes_to_stdout(args: list[str]) -> bool:
+    """Whether an output option names standard output (``-o /dev/stdout``)."""
+    from ..atomic import output_stream
+
+    for n, token in enumerate(args):
+        name, _, value = token.partition("=")
+        if name in _OUTPUT_OPTIONS:
+            value = value or (args[n + 1] if n + 1 < len(args) else "")
+            if value and output_stream(value) == 1:
+                return True
+    return False
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text.replace("x", "e") if "x" in text else text)
+        return "x" not in text
+    except ValueError:
+        return False
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``isoconvert`` command; returns the exit code.
+
+    SIGTERM and SIGHUP stop a run as Ctrl-C does (:mod:`isoconvert.signals`):
+    partial output is removed, one line says so, and the exit code is 128 +
+    the signal number (130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP).
+    """
+    from .. import signals
+
+    with signals.handled():
+        return _main(argv)
+
+
+def _interrupted() -> int:
+    """Say that the run was stopped, in one line; the exit code, 128 + the signal."""
+    import contextlib
+    import signal
+
+    from .. import signals
+
+    signum = signals.received()
+    by = f" ({signals.signal_name(signum)})" if signum and signum != signal.SIGINT else ""
+    with contextlib.suppress(OSError, ValueError):  # SIGHUP: the terminal may be gone
+        print(f"isoconvert: interrupted{by}; no partial output was left", file=sys.stderr)
+    return 128 + (signum or signal.SIGINT)
+
+
+def _main(argv: list[str] | None) -> int:
+    args = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in args
+    display._show_third_party = debug  # numpy warnings and tifffile's log lines are not for users
+    args = gather_multi_values([a for a in args if a != "--debug"])
+    # a mesh sent to standard output must not have messages mixed into it
+    talk = redirect_stdout(sys.stderr) if _writes_to_stdout(args) else nullcontext()
+    try:
+        with talk:
+            result = app(args=args, prog_name="isoconvert", standalone_mode=False)
+        code = result if isinstance(result, int) else 0
+        if code == 130:  # click turns Ctrl-C into exit code 130
+            return _interrupted()
+        return code
+    except SystemExit as exc:
+        code = exc.code
+        code = code if isinstance(code, int) else (0 if code is None else 1)
+        if code == 130:  # click turns Ctrl-C into exit code 130, and batch Ctrl-C, SIGTERM too
+            return _interrupted()
+        return code
+    except IsoconvertError as exc:
+        if debug:
+            raise
+        print(f"isoconvert: error: {one_line(exc, limit=2000)}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:  # Ctrl-C, and SIGTERM or SIGHUP (signals.Interrupted)
+        if debug:
+            raise
+        return _interrupted()
+    except MemoryError:
+        if debug:
+            raise
+        print("isoconvert: error: out of memory; try a smaller volume", file=sys.stderr)
+        return 1
+    except Exception as exc:
+        if _is_usage_error(exc):
+            message = exc.format_message()
+            if not message:  # `isoconvert` alone: the help was the answer
+                return 2
+            # one line, as for every other mistake (click draws a box of several)
+            ctx = getattr(exc, "ctx", None)
+            command = ctx.command_path if ctx is not None else "isoconvert"
+            print(
+                f"isoconvert: error: {one_line(message, limit=500)} (see {command} --help)",
+                file=sys.stderr,
+            )
+            return 2
+        if type(exc).__name__ == "Abort":  # click's Ctrl-C (or SIGTERM, SIGHUP)
+            return _interrupted()
+        # a bug, not a user mistake: say so in one line
+        if debug:
+            raise
+        print(
+            f"isoconvert: internal error: {type(exc).__name__}: {exc} "
+            "(rerun with --debug and report it)",
+            file=sys.stderr,
+        )
+        return 3
+    return 0
+
+
+def _is_usage_error(exc: Exception) -> bool:
+    """A command line click could not parse (its UsageError, which typer vendors
+    under a private name): exit code 2 and a message."""
+    return getattr(exc, "exit_code", None) == 2 and hasattr(exc, "format_message")
+
+
+def run() -> None:
+    """Console-script entry point."""
+    sys.exit(main())

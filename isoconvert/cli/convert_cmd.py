@@ -1,0 +1,182 @@
+"""``isoconvert convert``: one volume to one mesh per level (or per label)."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..atomic import check_output
+from ..errors import IsoconvertError
+from .display import _quiet_third_party, _stage_display
+from .options import (
+    EXIT_CHECK_FAILED,
+    ExamplesOpt,
+    ExtractArgs,
+    ForceOpt,
+    LabelArgs,
+    LevelOpt,
+    MemoryArgs,
+    MeshArgs,
+    PostArgs,
+    QuietOpt,
+    ReadArgs,
+    RequireOpt,
+    VerboseOpt,
+    _convert_options,
+    _grouped,
+)
+from .reports import _report_result
+
+
+@_grouped()
+def convert(
+    input: Annotated[str, typer.Argument(help="Volume file, folder of TIFF slices, or glob.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Mesh file to write.")],
+    level: LevelOpt = None,
+    extract: ExtractArgs = ExtractArgs(),
+    force: ForceOpt = False,
+    report: Annotated[
+        str | None,
+        typer.Option(
+            help="Check the mesh and print a report; --report FILE.json writes it as JSON, "
+            "--report FILE.txt as the table it prints.",
+            rich_help_panel="Checks",
+        ),
+    ] = None,
+    require: RequireOpt = None,
+    examples: ExamplesOpt = 5,
+    preview: Annotated[
+        Path | None,
+        typer.Option(
+            help="Also write a picture of the mesh with its problems marked, as FILE.png "
+            "(needs isoconvert\\[render]).",
+            rich_help_panel="Output",
+        ),
+    ] = None,
+    quiet: QuietOpt = False,
+    verbose: VerboseOpt = False,
+    read: ReadArgs = ReadArgs(),
+    mesh: MeshArgs = MeshArgs(),
+    values: Annotated[
+        str | None,
+        typer.Option(
+            help="Write the value of this volume (read like the input) at each vertex, by "
+            "trilinear interpolation in world coordinates (PLY, VTP, GLB).",
+            rich_help_panel="Output",
+        ),
+    ] = None,
+    post: PostArgs = PostArgs(),
+    memory: MemoryArgs = MemoryArgs(),
+    labels: LabelArgs = LabelArgs(),
+) -> None:
+    """Extract an isosurface from a volume and write it as a mesh."""
+    _quiet_third_party()
+    from ..report import parse_requirements
+
+    required = parse_requirements(require)
+    from ..convert import convert_levels, level_outputs
+    from ..label_convert import convert_labels
+
+    options = _convert_options(
+        read,
+        extract,
+        mesh,
+        post,
+        labels,
+        level,
+        force=force,
+        values=values,
+        blocks=memory.blocks(),
+    )
+    by_label = options.labels is not None
+    if not by_label and not level:
+        raise IsoconvertError(
+            "convert needs --level (a number, or auto), or --labels for a label volume"
+        )
+    reports = None
+    if report not in (None, "-") and not by_label:
+        reports = level_outputs(report, level)
+        for path in reports:
+            check_output(path, force, "report.json")  # a bad report name must not cost a mesh
+    elif report not in (None, "-") and not options.single_file and len(options.labels or ()) != 1:
+        from ..atomic import refuse_stream
+
+        refuse_stream(report, "--labels writes a report per label")
+    if preview is not None:  # before the work: no renderer or a bad name must not cost a mesh
+        from ..preview import check_picture_output, require_renderer
+
+        require_renderer()
+        check_picture_output(preview, force)
+    # reports and pictures must not replace an input's file either
+    also_writes = [*(reports or ()), *([preview] if preview is not None else ())]
+    if by_label and report not in (None, "-"):
+        also_writes.append(report)
+    start = time.perf_counter()
+    with _stage_display(quiet, verbose) as (on_progress, on_status):
+        run, first = (convert_labels, options.labels) if by_label else (convert_levels, level)
+        results = run(
+            input,
+            output,
+            first,
+            options,
+            also_writes=also_writes,
+            on_status=on_status,
+            on_progress=on_progress,
+        )
+    if not quiet:
+        for note in results[0].volume.notes:
+            print(f"note: {note}", file=sys.stderr)
+    if by_label and report not in (None, "-"):
+        name = Path(report)
+        reports = [name.with_name(f"{name.stem}_{r.output.stem}{name.suffix}")
+                   for r in results] if len(results) > 1 else [report]  # fmt: skip
+    failed = []
+    steps = options.post.steps
+    for n, result in enumerate(results):
+        if not quiet:
+            made = result.mesh
+            kind = "triangles" if made.is_triangles else "segments"
+            kind = f"{kind}, {made.info['method']}"
+            slabs = made.info.get("blocks", 1)
+            if slabs > 1:
+                kind += f" in {slabs} slabs"
+            done = f", {', '.join(steps)}" if steps and not by_label else ""
+            what = made.info["level"]
+            if by_label and options.single_file:
+                what = f"labels {what}"
+            else:
+                what = f"label {what:g}" if by_label else f"level {what:g}"
+            print(
+                f"wrote {result.output}: {made.n_vertices:,} vertices, {made.n_cells:,} {kind} "
+                f"({what}{done}, {time.perf_counter() - start:.2f} s)"
+            )
+        if report is not None or required:
+            target = reports[n] if reports else report
+            failed += _report_result(result, target, required, examples, force, quiet)
+        if preview is not None:
+            _write_preview(result, preview, output, len(results), force, quiet)
+    if failed:
+        raise typer.Exit(EXIT_CHECK_FAILED)
+
+
+def _write_preview(
+    result, preview: Path, output: Path, count: int, force: bool, quiet: bool
+) -> None:
+    """The picture of one mesh convert wrote: ``preview`` itself for one mesh,
+    else named like the mesh (``-o em.ply --preview pic.png`` with two levels:
+    ``pic_level80.5.png``, ``pic_level180.5.png``)."""
+    from ..preview import render_preview, write_preview
+
+    target = preview
+    if count > 1:
+        stem, base = result.output.stem, Path(output).stem
+        tail = stem[len(base) :] if stem.startswith(base) else f"_{stem}"
+        target = preview.with_name(f"{preview.stem}{tail}.png")
+    picture = render_preview(result.mesh, checked=result.written, grid=result.mesh.info.get("grid"))
+    write_preview(picture, target, force)
+    if not quiet:
+        print(f"wrote {target}: preview", file=sys.stderr)
