@@ -35,3 +35,14 @@ def one_line(text: object, limit: int = 300) -> str:
     flat = " ".join(str(text).split())
     flat = "".join(c if c.isprintable() else "?" for c in flat)
     return flat if len(flat) <= limit else flat[: limit - 3] + "..."
+
+
+#: The extra of isoconvert that installs each optional package a format needs.
+EXTRAS = {"h5py": "hdf5", "netCDF4": "netcdf"}
+
+
+def install_hint(package: str) -> str:
+    """How to install an optional package: ``pip install "isoconvert[hdf5]"`` for
+    h5py, and so on; ``pip install PACKAGE`` for one without an extra."""
+    extra = EXTRAS.get(package)
+    return f'pip install "isoconvert[{extra}]"' if extra else f"pip install {package}"

@@ -23,6 +23,8 @@ from isoconvert.meshfile import MESH_SUFFIXES, READ_SUFFIXES, read_mesh
 #: the issue's formats and a few more, as meshio writes them
 FORMATS = [".vtu", ".vtk", ".msh", ".xdmf", ".inp", ".mesh", ".med", ".avs", ".mdpa"]
 
+HINT = 'needs the h5py package; pip install "isoconvert[hdf5]"'
+
 
 def needs(suffix: str) -> None:
     if suffix in (".xdmf", ".med"):
@@ -156,7 +158,7 @@ def test_a_missing_h5py_is_the_install_hint_not_a_traceback(tmp_path, monkeypatc
     path = tmp_path / "m.med"
     path.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(100))
     monkeypatch.setitem(sys.modules, "h5py", None)
-    one_line_error(*run("check", str(path)), "needs the h5py package; pip install h5py")
+    one_line_error(*run("check", str(path)), HINT)
 
 
 def test_check_and_preview_read_a_vtu_from_the_command_line(torus, tmp_path):
@@ -192,4 +194,4 @@ def test_an_xdmf_with_hdf5_data_without_h5py_is_the_install_hint(torus, tmp_path
     meshio.write(path, meshio.Mesh(torus.vertices, [("triangle", torus.cells)]))  # HDF5 data
     assert read_mesh(path).n_cells == torus.n_cells
     monkeypatch.setitem(sys.modules, "h5py", None)
-    one_line_error(*run("check", str(path)), "needs the h5py package; pip install h5py")
+    one_line_error(*run("check", str(path)), HINT)

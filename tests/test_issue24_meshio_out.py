@@ -174,7 +174,9 @@ def test_a_missing_h5py_is_the_install_hint(torus, tmp_path, monkeypatch):
     import sys
 
     monkeypatch.setitem(sys.modules, "h5py", None)  # import h5py now raises ImportError
-    with pytest.raises(FormatError, match=r"needs the h5py package; pip install h5py"):
+    with pytest.raises(
+        FormatError, match=r'needs the h5py package; pip install "isoconvert\[hdf5\]"'
+    ):
         write_mesh(plain(torus), tmp_path / "t.xdmf")
     assert os.listdir(tmp_path) == []
 

@@ -14,7 +14,7 @@ import io
 import warnings
 from pathlib import Path
 
-from ..errors import FormatError, one_line
+from ..errors import FormatError, install_hint, one_line
 from ..mesh import Mesh
 
 #: suffix -> (meshio's format name, or names tried in turn; the optional package it
@@ -69,7 +69,7 @@ def _read_meshio(path: Path, suffix: str | None = None) -> Mesh:
             __import__(needs)
         except ImportError:
             raise FormatError(
-                f"{path}: reading {what} needs the {needs} package; pip install {needs}"
+                f"{path}: reading {what} needs the {needs} package; {install_hint(needs)}"
             ) from None
     try:
         import meshio
@@ -87,7 +87,7 @@ def _read_meshio(path: Path, suffix: str | None = None) -> Mesh:
     except ImportError as exc:  # a package meshio needs for this file (HDF5 in an XDMF)
         package = getattr(exc, "name", None) or "a package"
         raise FormatError(
-            f"{path}: reading this {what} needs the {package} package; pip install {package}"
+            f"{path}: reading this {what} needs the {package} package; {install_hint(package)}"
         ) from None
     except SystemExit:  # meshio prints why a reader failed, then exits
         lines = [line.strip() for line in printed.getvalue().splitlines()]

@@ -27,7 +27,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..errors import FormatError, one_line
+from ..errors import FormatError, install_hint, one_line
 from ..mesh import Mesh
 
 
@@ -152,7 +152,7 @@ def import_meshio():
 
 def requirement_error(name: str, package: str) -> FormatError:
     """The one-line error of a format whose optional package is missing."""
-    return FormatError(f"{name}: the format needs the {package} package; pip install {package}")
+    return FormatError(f"{name}: the format needs the {package} package; {install_hint(package)}")
 
 
 def write_with_meshio(name: str, mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
