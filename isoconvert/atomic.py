@@ -172,13 +172,15 @@ _WRITABLE_DEVICES = re.compile(r"^/dev/(?:null|tty\w*|pts/\d+)$")
 def output_stream(path: str | Path) -> int | str | None:
     """What ``-o PATH`` means when it names a stream rather than a file.
 
-    ``/dev/stdout``, ``/dev/stderr`` and ``/dev/fd/N`` (``/proc/self/fd/N``),
+    ``-``, ``/dev/stdout``, ``/dev/stderr`` and ``/dev/fd/N`` (``/proc/self/fd/N``),
     through any symlinks, mean the process's open file descriptor N: returns
     N, and the output goes wherever the shell sent it (a pipe, a terminal, a
     redirected file). ``/dev/null`` or a terminal is written in place: returns
     its path. Anything else (a regular file, a new name, a named pipe, which
     would block with no reader, a block device) returns None.
     """
+    if os.fspath(path) == "-":  # the Unix convention: standard output
+        return 1
     text = os.path.abspath(os.fspath(path))
     for _ in range(40):  # symlink hops
         if text in _STD_STREAMS:

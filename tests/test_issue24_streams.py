@@ -30,23 +30,12 @@ def isoconvert(*args: str, cwd: Path, stdin: bytes | None = None) -> subprocess.
     )
 
 
-#: ``-o -`` waits for one change in cli.py (not this task's file): convert's bare
-#: ``--report`` is passed on as ``--report -`` ("print it"), which _writes_to_stdout
-#: would take for standard output and so send the printed report to stderr. Once
-#: _writes_to_stdout skips ``--report -``, atomic.output_stream("-") returns 1.
-NEEDS_CLI = pytest.mark.xfail(
-    strict=True, reason="cli._writes_to_stdout must not take convert's --report - for stdout"
-)
-
-
-@NEEDS_CLI
 def test_dash_is_standard_output():
     assert output_stream("-") == 1
     assert output_stream(Path("-")) == 1
     assert output_stream("./-") is None  # a file named "-" is still one, when spelled so
 
 
-@NEEDS_CLI
 @pytest.mark.parametrize("fmt", ["ply", "stl", "obj", "vtu", "vtk"])
 def test_convert_to_dash_writes_the_file_s_bytes_to_stdout(tmp_path, fmt):
     to_file = isoconvert("convert", SPHERE, "-l", "100.5", "-o", f"a.{fmt}", cwd=tmp_path)
@@ -58,7 +47,7 @@ def test_convert_to_dash_writes_the_file_s_bytes_to_stdout(tmp_path, fmt):
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"a.{fmt}"]  # no file named "-"
 
 
-@pytest.mark.parametrize("stream", ["/dev/stdout", pytest.param("-", marks=NEEDS_CLI)])
+@pytest.mark.parametrize("stream", ["/dev/stdout", "-"])
 def test_a_stream_without_format_is_one_line_and_writes_nothing(tmp_path, stream):
     run = isoconvert("convert", SPHERE, "-l", "100.5", "-o", stream, cwd=tmp_path)
     assert run.returncode == 1 and run.stdout == b""
@@ -129,3 +118,31 @@ def test_format_overrides_the_suffix(tmp_path):
     np.testing.assert_array_equal(mesh.cells, faces)
     with pytest.raises(FormatError, match="unknown mesh format 'xyz'"):
         read_mesh(tmp_path / "t.dat", format="xyz")
+
+
+@pytest.mark.parametrize("fmt", ["ply", "stl", "vtu"])
+def test_convert_piped_into_check_reads_standard_input(tmp_path, fmt):
+    """`convert -o - | check - --format F`: the report of the piped mesh is the
+    report of the same mesh written to a file."""
+    command = [sys.executable, "-m", "isoconvert"]
+    producer = subprocess.Popen(
+        [*command, "convert", SPHERE, "-l", "100.5", "-o", "-", "--format", fmt],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        cwd=tmp_path,
+    )
+    piped = subprocess.run(
+        [*command, "check", "-", "--format", fmt, "--json", "--require", "watertight"],
+        stdin=producer.stdout,
+        capture_output=True,
+        cwd=tmp_path,
+        check=False,
+    )
+    producer.stdout.close()
+    assert producer.wait() == 0 and piped.returncode == 0, piped.stderr
+    isoconvert("convert", SPHERE, "-l", "100.5", "-o", f"m.{fmt}", cwd=tmp_path)
+    on_file = isoconvert("check", f"m.{fmt}", "--json", cwd=tmp_path)
+    ours, theirs = json.loads(piped.stdout), json.loads(on_file.stdout)
+    for report in (ours, theirs):
+        report.pop("source", None)
+    assert ours == theirs

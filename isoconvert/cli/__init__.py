@@ -178,6 +178,8 @@ def _writes_to_stdout(args: list[str]) -> bool:
         name, _, value = token.partition("=")
         if name in _OUTPUT_OPTIONS:
             value = value or (args[n + 1] if n + 1 < len(args) else "")
+            if name == "--report" and value == "-":  # convert's bare --report: print it
+                continue
             if value and output_stream(value) == 1:
                 return True
     return False

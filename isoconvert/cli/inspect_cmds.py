@@ -21,12 +21,28 @@ from .display import _quiet_third_party
 from .options import ExamplesOpt, ReadArgs, RequireOpt, _flag, _grouped
 from .reports import _emit_report
 
+#: check's and preview's --format: the mesh's format, where its name does not tell
+MeshFormatOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--format",
+        help="The mesh's format by its usual extension (ply, stl, vtu, ...): for - "
+        "(standard input) or a name that does not tell.",
+    ),
+]
+
 
 @_grouped("channel", "scale", "allow_missing_chunks", "key", "volume_index", "series")
 def check(
     mesh_file: Annotated[
-        Path, typer.Argument(help="PLY, OBJ, OFF, STL, VTP, GLB or 3MF file to check.")
+        Path,
+        typer.Argument(
+            help="PLY, OBJ, OFF, STL, VTP, GLB or 3MF file to check, or any surface file "
+            "meshio reads (VTU, VTK, MSH, XDMF, INP, ...); - reads standard input "
+            "(with --format)."
+        ),
     ],
+    mesh_format: MeshFormatOpt = None,
     require: RequireOpt = None,
     as_json: Annotated[bool, _flag("--json", help="Print JSON instead of a table.")] = False,
     report: Annotated[
@@ -64,7 +80,7 @@ def check(
     if report is not None and report != "-":  # before reading: a bad name must not cost a check
         sources = [mesh_file, *(grid_files or ())]
         check_output(report, force, "report.txt", inputs=sources)
-    mesh = read_mesh(mesh_file)
+    mesh = read_mesh(mesh_file, format=mesh_format)
     checked = check_mesh(mesh, examples=examples, source=str(mesh_file), grid=frame)
     if report is not None and report != "-":
         _emit_report(checked, report, [], as_json=False, force=force, quiet=True, inputs=sources)
@@ -72,8 +88,15 @@ def check(
 
 
 def preview(
-    mesh_file: Annotated[Path, typer.Argument(help="PLY, OBJ, STL, OFF, VTP, GLB or 3MF file.")],
+    mesh_file: Annotated[
+        Path,
+        typer.Argument(
+            help="PLY, OBJ, OFF, STL, VTP, GLB or 3MF file, or any surface file meshio "
+            "reads; - reads standard input (with --format)."
+        ),
+    ],
     output: Annotated[Path, typer.Option("-o", "--output", help="PNG file to write.")],
+    mesh_format: MeshFormatOpt = None,
     size: Annotated[str, typer.Option(help="Picture size in pixels, WIDTHxHEIGHT.")] = "1024x768",
     background: Annotated[
         str, typer.Option(help="Background colour: a name or #rrggbb.")
@@ -88,7 +111,12 @@ def preview(
 
     start = time.perf_counter()
     picture = preview_file(
-        mesh_file, output, size=parse_size(size), background=parse_colour(background), force=force
+        mesh_file,
+        output,
+        size=parse_size(size),
+        background=parse_colour(background),
+        force=force,
+        format=mesh_format,
     )
     if not quiet:  # what the picture's footer says, so as the report says
         print(f"wrote {output}: {picture.describe()} ({time.perf_counter() - start:.2f} s)")

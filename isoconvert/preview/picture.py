@@ -272,8 +272,13 @@ def preview_file(
     size: tuple[int, int] = DEFAULT_SIZE,
     background: str | tuple[int, int, int] = "white",
     force: bool = False,
+    format: str | None = None,
 ) -> Preview:
     """Read a mesh file and write its preview PNG (``isoconvert preview``).
+
+    ``path`` may be ``-`` (standard input) with ``format``, the mesh's format by
+    its usual extension (``ply``, ``stl``, ...), as for
+    :func:`isoconvert.meshfile.read_mesh`.
 
     Raises
     ------
@@ -287,9 +292,10 @@ def preview_file(
     check_picture_output(output, force)  # before the work
     refuse_inputs(output, [path])
     _renderer_check()
-    mesh = read_mesh(path)
-    for key, value in recorded_header(path).items():
-        mesh.info.setdefault(key, value)
+    mesh = read_mesh(path, format=format)
+    if str(path) != "-":  # standard input cannot be read twice
+        for key, value in recorded_header(path).items():
+            mesh.info.setdefault(key, value)
     preview = render_preview(mesh, size=size, background=background)
     write_preview(preview, output, force)
     return preview
