@@ -200,6 +200,28 @@ def output_stream(path: str | Path) -> int | str | None:
     return None
 
 
+def refuse_shared(outputs: Iterable[str | Path]) -> None:
+    """Raise OutputError when two of a run's outputs (meshes, reports, pictures)
+    are one file or one stream: the second would replace the first.
+
+    Names are compared as absolute paths, existing files by device and inode,
+    streams by what they write to (``-`` and ``/dev/stdout`` are one).
+    """
+    seen: dict[object, Path] = {}
+    for path in map(Path, outputs):
+        stream = output_stream(path)
+        keys = [("stream", stream)] if stream is not None else [os.path.abspath(path)]
+        if stream is None and _identity(path) is not None:
+            keys.append(_identity(path))
+        for key in keys:
+            if key in seen and not (isinstance(stream, str) and stream == "/dev/null"):
+                raise OutputError(
+                    f"{path}: is named for two outputs ({seen[key]} too), and the second "
+                    "would replace the first; give each its own name"
+                )
+            seen[key] = path
+
+
 def refuse_stream(path: str | Path, why: str) -> None:
     """Raise OutputError when ``path`` is a stream (:func:`output_stream`) but
     several files would be named after it: ``why`` says which."""

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import check_output, output_stream, refuse_inputs, refuse_stream
+from .atomic import check_output, output_stream, refuse_inputs, refuse_shared, refuse_stream
 from .attributes import check_3d, vertex_normals, vertex_values
 from .errors import IsoconvertError, OutputError
 from .extract import default_method, extract
@@ -266,6 +266,7 @@ def convert_levels(
     by_suffix = WRITERS.by_suffix(Path(output).suffix)
     if on_status and by_suffix and by_suffix[0] != writer.name:
         on_status(f"note: writing {writer.name} into {output}, whose extension says {by_suffix[0]}")
+    refuse_shared([*outputs, *also_writes])
     for path in [*outputs, *also_writes]:  # the input file itself, before its header is read
         refuse_inputs(path, [input] if Path(input).is_file() else [])
     progress("reading")

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import check_output, refuse_inputs, refuse_stream
+from .atomic import check_output, refuse_inputs, refuse_shared, refuse_stream
 from .convert import ConvertOptions, ConvertResult, read_input, refuse_outputs_read
 from .errors import IsoconvertError
 from .extract.tables import DEFAULT_AMBIGUITY
@@ -89,6 +89,7 @@ def convert_labels(
         for path in label_outputs(output, opts.labels):
             check_output(path, opts.force)
     known = [output] if opts.single_file else label_outputs(output, opts.labels)
+    refuse_shared([*known, *also_writes])
     for path in [*known, *also_writes]:  # the input itself, before its header is read
         refuse_inputs(path, [input] if Path(input).is_file() else [])
     progress("reading")

@@ -461,3 +461,28 @@ def test_batch_summary_never_replaces_the_levels_table(tmp_path, capsys):
     assert_one_line_error(code, err, str(table), "destroy")
     assert digest(table) == before
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "names",
+    [
+        ["-o", "same.ply", "--report=same.ply"],
+        ["-l", "130", "-o", "mm.ply", "--report=mm.ply"],  # NAME_levelL.ply for both
+        ["-o", "m.ply", "--preview", "c.png", "--report=c.png"],
+        ["-o", "/dev/stdout", "--format", "ply", "--report=/dev/stdout"],
+        ["-o", "-", "--format", "ply", "--report=/dev/stdout"],
+    ],
+    ids=[
+        "report is the mesh",
+        "per-level names",
+        "report is the preview",
+        "one stream",
+        "dash and stdout",
+    ],  # fmt: skip
+)
+def test_two_outputs_never_share_a_name(tmp_path, capsys, monkeypatch, names):
+    pytest.importorskip("vtk")
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run(capsys, "convert", SPHERE, "-l", "127.5", *names, "--force")
+    assert_one_line_error(code, err, "two outputs")
+    assert os.listdir(tmp_path) == [] and out == ""

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import gc
 import mmap
 import pickle
 import tempfile
@@ -380,6 +381,17 @@ _SPILL_WHY = (
 )
 
 
+def _close_map(mapped: mmap.mmap) -> None:
+    """Close a memory map now, or, while a view still holds it, once the last
+    view goes (the collector first gets a chance to drop forgotten ones)."""
+    try:
+        mapped.close()
+    except BufferError:
+        gc.collect()
+        with contextlib.suppress(BufferError):
+            mapped.close()
+
+
 class _Growing:
     """An array that grows along its first axis without copying what it holds.
 
@@ -398,6 +410,7 @@ class _Growing:
         self.size = 0  # rows committed
         self._map = mmap.mmap(-1, 1 << 16, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
         self._file = None
+        self._folder: str | None = None  # of the spill file, once spilled
 
     @property
     def nbytes(self) -> int:
@@ -406,22 +419,59 @@ class _Growing:
     def reserve(self, rows: int) -> None:
         """Room for ``rows`` more rows after the committed ones."""
         need = (self.size + rows) * self.row
-        if need > len(self._map):
-            if self._file is None:
-                self._map.resize(max(need, 2 * len(self._map)))
-                if hasattr(mmap, "MADV_HUGEPAGE"):
-                    self._map.madvise(mmap.MADV_HUGEPAGE)
-                return
-            try:  # on disk: its blocks first (FileMap.grow), and no more than fits
-                self._map.grow(max(need, 2 * len(self._map)))
-            except DiskFullError:
-                self._map.grow(need)
+        if need <= len(self._map):
+            return
+        try:
+            self._grow(need)
+        except BufferError:
+            # a view of the map outlived its use, held by a reference cycle (an
+            # exception's frames, a task's result on another thread) until the
+            # collector runs: collect, then grow; failing that, move to a new map
+            gc.collect()
+            try:
+                self._grow(need)
+            except BufferError:
+                self._move(max(need, 2 * len(self._map)))
+
+    def _grow(self, need: int) -> None:
+        if self._file is None:
+            self._map.resize(max(need, 2 * len(self._map)))
+            if hasattr(mmap, "MADV_HUGEPAGE"):
+                self._map.madvise(mmap.MADV_HUGEPAGE)
+            return
+        try:  # on disk: its blocks first (FileMap.grow), and no more than fits
+            self._map.grow(max(need, 2 * len(self._map)))
+        except DiskFullError:
+            self._map.grow(need)
+
+    def _move(self, size: int) -> None:
+        """Copy what the map holds into a new, larger one (views still held keep
+        the old one alive, and see none of what is written from now on)."""
+        if self._file is not None:
+            fh = tempfile.TemporaryFile(dir=Path(self._folder), prefix=".isoconvert-mesh-")
+            try:
+                moved = FileMap.create(fh.fileno(), size, Path(self._folder), _SPILL_WHY)
+            except BaseException:
+                fh.close()
+                raise
+        else:
+            fh = None
+            moved = mmap.mmap(-1, size, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+        used = self.size * self.row
+        step = 1 << 24
+        for a in range(0, used, step):  # piece by piece: no copy of the whole
+            moved[a : min(a + step, used)] = self._map[a : min(a + step, used)]
+        old_file = self._file
+        self._map, self._file = moved, fh
+        if old_file is not None:
+            old_file.close()  # its pages stay mapped while old views live
 
     def spill(self, folder: Path) -> None:
         """Move the array into a temporary file in ``folder``; from now on its
         committed pages can be given back (:meth:`release`)."""
         if self._file is not None:
             return
+        self._folder = str(folder)
         fh = tempfile.TemporaryFile(dir=folder, prefix=".isoconvert-mesh-")
         size = len(self._map)
         try:
@@ -432,7 +482,7 @@ class _Growing:
         step = 1 << 24
         for a in range(0, size, step):  # piece by piece: no copy of the whole
             mapped[a : a + step] = self._map[a : a + step]
-        self._map.close()
+        _close_map(self._map)
         self._map, self._file = mapped, fh
 
     def release(self, stop: int) -> None:
@@ -454,7 +504,12 @@ class _Growing:
         """The committed rows; the map (and its file) is then the array's."""
         if self.size == 0:
             return np.empty((0, *self.width), dtype=self.dtype)
-        self._map.resize(self.size * self.row)
+        try:
+            self._map.resize(self.size * self.row)
+        except BufferError:  # a view outlived its use (see reserve)
+            gc.collect()
+            with contextlib.suppress(BufferError):  # else the map keeps its spare rows
+                self._map.resize(self.size * self.row)
         out = self.view(0, self.size)
         self._map = self._file = None  # the view keeps both open
         return out
