@@ -486,3 +486,27 @@ def test_two_outputs_never_share_a_name(tmp_path, capsys, monkeypatch, names):
     code, out, err = run(capsys, "convert", SPHERE, "-l", "127.5", *names, "--force")
     assert_one_line_error(code, err, "two outputs")
     assert os.listdir(tmp_path) == [] and out == ""
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["info", "LONG.nrrd"],
+        ["check", "LONG.ply"],
+        ["convert", SPHERE, "-l", "127.5", "-o", "LONG/x.ply"],
+        ["batch", SPHERE, "-l", "127.5", "-o", "LONG"],
+        ["convert", SPHERE, "-l", "127.5", "-o", "x.ply", "--values", "LONG.nrrd"],
+        ["convert", SPHERE, "-l", "127.5", "-o", "x.ply", "--report=LONG/r.json"],
+    ],
+    ids=["info", "check", "output folder", "batch folder", "values", "report folder"],
+)
+def test_a_name_too_long_anywhere_is_one_line_not_an_internal_error(
+    tmp_path, capsys, monkeypatch, args
+):
+    monkeypatch.chdir(tmp_path)
+    long = "k" * 260
+    code, _, err = run(capsys, *[a.replace("LONG", long) if isinstance(a, str) else a
+                                 for a in args])  # fmt: skip
+    assert_one_line_error(code, err, "too long")
+    assert "internal error" not in err
+    assert os.listdir(tmp_path) == []

@@ -23,6 +23,7 @@ stderr), 2 a usage error, 3 an internal error (a bug), 4 a check named by
 
 from __future__ import annotations
 
+import errno
 import sys
 from contextlib import nullcontext, redirect_stdout
 from typing import Annotated
@@ -255,6 +256,15 @@ def _main(argv: list[str] | None) -> int:
         print("isoconvert: error: out of memory; try a smaller volume", file=sys.stderr)
         return 1
     except Exception as exc:
+        if isinstance(exc, OSError) and exc.errno == errno.ENAMETOOLONG and not debug:
+            # a name given on the command line that no file system takes, wherever used
+            name = one_line(exc.filename if exc.filename is not None else "a path", limit=120)
+            print(
+                f"isoconvert: error: {name}: the name is too long for the file system "
+                "(255 bytes a name, 4096 a path); choose a shorter one",
+                file=sys.stderr,
+            )
+            return 1
         if _is_usage_error(exc):
             message = exc.format_message()
             if not message:  # `isoconvert` alone: the help was the answer
