@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from .convert import ConvertOptions, level_outputs
-from .errors import InputNotFoundError, IsoconvertError, OutputError, one_line
+from .errors import InputNotFoundError, IsoconvertError, OutputError, one_line, utf8_text
 from .quiet import silence_third_party
 from .readers import READERS, format_suffix, is_dicom_file, unsupported_format
 from .readers.stacks import TIFF_SUFFIXES, is_zarr_store, natural_key
@@ -1301,7 +1301,8 @@ def summary_bytes(outcomes: list[Outcome], suffix: str) -> bytes:
             s: sum(o.status == s for o in outcomes)
             for s in ("ok", "failed", "check-failed", "skipped", "interrupted")
         }
-        return (json.dumps({"files": rows, "totals": totals}, indent=2) + "\n").encode("utf-8")
+        text = json.dumps({"files": rows, "totals": totals}, indent=2, ensure_ascii=False)
+        return utf8_text(text + "\n")
     if suffix == ".csv":
         out = io.StringIO()
         writer = csv.DictWriter(out, fieldnames=SUMMARY_FIELDS, lineterminator="\n")
@@ -1311,5 +1312,5 @@ def summary_bytes(outcomes: list[Outcome], suffix: str) -> bytes:
                 f"{k}={'pass' if v else 'fail'}" for k, v in (row["checks"] or {}).items()
             )
             writer.writerow(row)
-        return out.getvalue().encode("utf-8")
+        return utf8_text(out.getvalue())
     raise IsoconvertError(f"--summary takes a .json or .csv file name, got {suffix or 'none'}")

@@ -46,3 +46,10 @@ def install_hint(package: str) -> str:
     h5py, and so on; ``pip install PACKAGE`` for one without an extra."""
     extra = EXTRAS.get(package)
     return f'pip install "isoconvert[{extra}]"' if extra else f"pip install {package}"
+
+
+def utf8_text(text: str) -> bytes:
+    """``text`` as UTF-8 bytes, whatever file names it holds: a name that is not
+    valid UTF-8 (Python keeps its bytes as lone surrogates) shows U+FFFD where
+    those bytes were, as file managers show it, instead of failing to encode."""
+    return text.encode("utf-8", "surrogateescape").decode("utf-8", "replace").encode("utf-8")

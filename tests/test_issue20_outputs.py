@@ -510,3 +510,32 @@ def test_a_name_too_long_anywhere_is_one_line_not_an_internal_error(
     assert_one_line_error(code, err, "too long")
     assert "internal error" not in err
     assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("summary", ["s.csv", "s.json"])
+def test_a_file_name_that_is_not_utf8_is_summarised_and_linked(tmp_path, capsys, summary):
+    pytest.importorskip("vtk")
+    import json
+    import re
+    import urllib.parse
+
+    folder = tmp_path / "in"
+    folder.mkdir()
+    name = os.fsdecode(b"bad\xffname.nrrd")  # a byte no UTF-8 decoder takes
+    (folder / name).write_bytes(Path(SPHERE).read_bytes())
+    out = tmp_path / "out"
+    args = ["batch", folder, "-o", out, "-l", "127.5", "--summary", tmp_path / summary]
+    code, _, err = run(capsys, *args, "--previews")
+    assert code == 0, err
+    text = (tmp_path / summary).read_bytes().decode("utf-8")  # valid UTF-8
+    if summary.endswith(".json"):
+        (row,) = json.loads(text)["files"]
+        assert row["status"] == "ok" and "bad\ufffdname" in row["input"]
+    else:
+        assert "bad\ufffdname.nrrd" in text
+    page = (out / "index.html").read_bytes().decode("utf-8")
+    links = re.findall(r'href="([^"]+)"', page)
+    assert links
+    for link in links:  # each link, read back as the bytes it quotes, is a file
+        target = os.fsdecode(urllib.parse.unquote_to_bytes(link))
+        assert (out / target).is_file(), link

@@ -23,6 +23,7 @@ stderr), 2 a usage error, 3 an internal error (a bug), 4 a check named by
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import sys
 from contextlib import nullcontext, redirect_stdout
@@ -204,7 +205,7 @@ def main(argv: list[str] | None = None) -> int:
     from .. import signals
 
     with signals.handled():
-        return _main(argv)
+        return _run_command(argv)
 
 
 def _interrupted() -> int:
@@ -221,11 +222,16 @@ def _interrupted() -> int:
     return 128 + (signum or signal.SIGINT)
 
 
-def _main(argv: list[str] | None) -> int:
+def _run_command(argv: list[str] | None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     display._show_third_party = debug  # numpy warnings and tifffile's log lines are not for users
     args = gather_multi_values([a for a in args if a != "--debug"])
+    for stream in (sys.stdout, sys.stderr):
+        # a file name that is not UTF-8 (Python holds its bytes as surrogates)
+        # prints with a replacement character instead of failing the run
+        with contextlib.suppress(AttributeError, ValueError):
+            stream.reconfigure(errors="replace")
     # a mesh sent to standard output must not have messages mixed into it
     talk = redirect_stdout(sys.stderr) if _writes_to_stdout(args) else nullcontext()
     try:

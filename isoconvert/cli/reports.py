@@ -9,6 +9,7 @@ import sys
 
 import typer
 
+from ..errors import utf8_text
 from .options import EXIT_CHECK_FAILED
 
 
@@ -63,7 +64,7 @@ def _emit_report(
             if changed is not None:
                 text += "\n\npost-processing changed:\n" + "\n".join(f"  {c}" for c in changed)
         with atomic_output(target, force, "report.txt", inputs) as fh:
-            fh.write((text + "\n").encode("utf-8"))
+            fh.write(utf8_text(text + "\n"))
     elif target == "-" and not quiet:
         print(json.dumps(checked.to_dict(), indent=2) if as_json else format_report(checked))
     failed = checked.failures(required)

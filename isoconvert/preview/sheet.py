@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import IsoconvertError, OutputError
+from ..errors import IsoconvertError, OutputError, utf8_text
 from ..mesh import Mesh
 from .marks import PROBLEMS
 from .picture import PNG_KEY, render_preview, write_preview
@@ -123,7 +123,8 @@ def contact_sheet(entries: Sequence[SheetEntry], folder: str | Path) -> str:
             rel = str(path.resolve())
         # a URL (# ? % and spaces in file names would be read as URL syntax), then
         # escaped for the attribute
-        return html.escape(urllib.parse.quote(Path(rel).as_posix(), safe="/"), quote=True)
+        # quoted from the name's bytes, so a name that is not UTF-8 still links
+        return html.escape(urllib.parse.quote(os.fsencode(Path(rel).as_posix()), safe="/"))
 
     cards = []
     for e in entries:
@@ -241,7 +242,7 @@ def write_contact_sheet(
 
     path = check_contact_sheet(folder, name)
     with atomic_output(path, force=True) as fh:
-        fh.write(contact_sheet(entries, folder).encode("utf-8"))
+        fh.write(utf8_text(contact_sheet(entries, folder)))
     return path
 
 
