@@ -440,3 +440,23 @@ def test_full_temporary_folder_of_a_stream_output_names_that_folder(
     found = disk_full_line(err, small_disk)
     assert "TMPDIR" in err and "/dev/null" in err, found
     assert list(small_disk.iterdir()) == []
+
+
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM", "SIGHUP"])
+def test_a_signal_while_the_command_starts_is_one_line(name):
+    """While typer and the commands are imported (a fifth of a second), a signal
+    stopped the command with a traceback (SIGINT) or without a word (TERM, HUP)."""
+    code = (
+        "import os, signal, sys, time\n"
+        "import isoconvert.entry as entry\n"
+        "assert 'typer' not in sys.modules  # the entry point starts light\n"
+        "entry._quiet_start()\n"
+        f"os.kill(os.getpid(), signal.{name})\n"
+        "time.sleep(10)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    signum = getattr(signal, name)
+    assert done.returncode == 128 + signum, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in done.stderr
+    assert lines[0] == f"isoconvert: interrupted ({name}) while starting; nothing was written"
