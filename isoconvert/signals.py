@@ -194,6 +194,29 @@ def worker_init(initializer: Callable[[], None] | None = None) -> None:
         initializer()
 
 
+def start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker (one process per parent, which
+    worker processes report their semaphores to) so that it ignores SIGHUP.
+
+    It ignores SIGINT and SIGTERM itself, but a closed terminal sends SIGHUP to
+    the whole process group: the tracker died of it, and the stopping workers
+    then printed a traceback each ("resource_tracker: process died
+    unexpectedly", ``KeyError: '/mp-...'``). An ignored signal stays ignored
+    across the tracker's exec, so it is ignored here while the tracker starts.
+    """
+    from multiprocessing import resource_tracker
+
+    hangup = getattr(signal, "SIGHUP", None)
+    if hangup is None or threading.current_thread() is not threading.main_thread():
+        resource_tracker.ensure_running()
+        return
+    before = signal.signal(hangup, signal.SIG_IGN)
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        signal.signal(hangup, before)
+
+
 def _die_with_parent() -> bool:
     """Ask Linux to send this process SIGTERM when its parent dies; False elsewhere."""
     if not sys.platform.startswith("linux"):
@@ -287,6 +310,7 @@ __all__ = [
     "resume",
     "run_in_worker",
     "signal_name",
+    "start_resource_tracker",
     "stop_workers",
     "stop_workers_on_interrupt",
     "worker_init",

@@ -184,8 +184,11 @@ def test_sigterm_while_the_mesh_spills_leaves_nothing(tmp_path, big_volume):
 # --- batch: terminated with its workers ---------------------------------------------------------
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGKILL])
-def test_terminated_batch_takes_its_workers_with_it(tmp_path, big_volume, signum):
+@pytest.mark.parametrize("group", [False, True], ids=["parent", "process group"])
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGKILL, signal.SIGHUP])
+def test_terminated_batch_takes_its_workers_with_it(tmp_path, big_volume, signum, group):
+    if group and signum == signal.SIGKILL:
+        pytest.skip("SIGKILL to every process leaves nobody to remove the partial files")
     """SIGTERM to a 2-worker batch mid-run: within a few seconds no process of
     its group is left, stdout reaches EOF, no .part file remains and no mesh
     appears afterwards. SIGKILL (no handler runs in the parent): the workers
@@ -200,7 +203,10 @@ def test_terminated_batch_takes_its_workers_with_it(tmp_path, big_volume, signum
     finished = {p.name for p in out.iterdir() if not p.name.endswith(".part")}
     workers = [pid for pid, _ in group_members(proc.pid) if pid != proc.pid]
     assert workers  # the worker processes (and multiprocessing's resource tracker)
-    proc.send_signal(signum)
+    if group:  # a closed terminal signals every process of the group at once
+        os.killpg(proc.pid, signum)
+    else:
+        proc.send_signal(signum)
     start_wait = time.monotonic()
     try:
         _, err = proc.communicate(timeout=15)  # EOF: nobody holds the pipes any more
@@ -208,8 +214,8 @@ def test_terminated_batch_takes_its_workers_with_it(tmp_path, big_volume, signum
         kill_group(proc.pid)
         pytest.fail("the batch's pipes stayed open 15 s after it was signalled (orphaned workers)")
     assert time.monotonic() - start_wait < 12
-    if signum == signal.SIGTERM:
-        assert proc.returncode == 143, err.decode()
+    if signum != signal.SIGKILL:  # one line, no worker's or tracker's traceback
+        assert proc.returncode == 128 + signum, err.decode()
         assert err.decode().strip().splitlines() == [interrupted_line(signum)]
     else:
         assert proc.returncode == -signal.SIGKILL

@@ -14,7 +14,12 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from typing import Any, TypeVar
 
 from ..errors import IsoconvertError
-from ..signals import run_in_worker, stop_workers_on_interrupt, worker_init
+from ..signals import (
+    run_in_worker,
+    start_resource_tracker,
+    stop_workers_on_interrupt,
+    worker_init,
+)
 from .tasks import Finished, Task
 
 T = TypeVar("T")
@@ -104,6 +109,7 @@ def run_in_processes(
     limit = budget or (1 << 62)
     pending = list(tasks)
     context = multiprocessing.get_context("spawn")  # no fork of a threaded parent
+    start_resource_tracker()  # before the workers: one that a hangup cannot kill
     while pending:
         running: dict = {}  # future: (task, start, its arguments)
         used = 0
