@@ -539,3 +539,21 @@ def test_a_file_name_that_is_not_utf8_is_summarised_and_linked(tmp_path, capsys,
     for link in links:  # each link, read back as the bytes it quotes, is a file
         target = os.fsdecode(urllib.parse.unquote_to_bytes(link))
         assert (out / target).is_file(), link
+
+
+def test_dev_stderr_gets_the_mesh_and_no_notes(tmp_path):
+    """Notes went to stderr as usual, so into the mesh sent there."""
+    header, _ = _nhdr_single(tmp_path)  # no spacing in the header: a note says so
+    reference = tmp_path / "reference.ply"
+    subprocess.run(_command("convert", header, "-l", "100.5", "-o", reference), check=True)
+    sent = tmp_path / "sent.ply"
+    with open(sent, "wb") as err:
+        done = subprocess.run(
+            _command("convert", header, "-l", "100.5", "-o", "/dev/stderr", "--format", "ply"),
+            stdout=subprocess.PIPE,
+            stderr=err,
+            cwd=tmp_path,
+            check=False,
+        )
+    assert done.returncode == 0
+    assert sent.read_bytes() == reference.read_bytes()

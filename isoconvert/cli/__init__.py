@@ -25,8 +25,9 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import os
 import sys
-from contextlib import nullcontext, redirect_stdout
+from contextlib import redirect_stdout
 from typing import Annotated
 
 import typer
@@ -172,19 +173,36 @@ def gather_multi_values(argv: list[str]) -> list[str]:
 _OUTPUT_OPTIONS = ("-o", "--output", "--report", "--plot", "--preview", "--summary")
 
 
-def _writes_to_stdout(args: list[str]) -> bool:
-    """Whether an output option names standard output (``-o /dev/stdout``)."""
+def _output_streams(args: list[str]) -> set[int]:
+    """The file descriptors that output options name (``-o -``, ``-o /dev/stdout``
+    give 1, ``/dev/stderr`` 2)."""
     from ..atomic import output_stream
 
+    found: set[int] = set()
     for n, token in enumerate(args):
         name, _, value = token.partition("=")
         if name in _OUTPUT_OPTIONS:
             value = value or (args[n + 1] if n + 1 < len(args) else "")
             if name == "--report" and value == "-":  # convert's bare --report: print it
                 continue
-            if value and output_stream(value) == 1:
-                return True
-    return False
+            stream = output_stream(value) if value else None
+            if isinstance(stream, int):
+                found.add(stream)
+    return found
+
+
+@contextlib.contextmanager
+def _messages_kept_off(streams: set[int]):
+    """A mesh sent to standard output or standard error must not have messages
+    mixed into it: those for stdout go to stderr, and with stderr the mesh's,
+    the notes are dropped (an error still gets its line, after the run)."""
+    with contextlib.ExitStack() as stack:
+        if 2 in streams:
+            sink = stack.enter_context(open(os.devnull, "w"))  # noqa: SIM115
+            stack.enter_context(contextlib.redirect_stderr(sink))
+        if 1 in streams:
+            stack.enter_context(redirect_stdout(sys.stderr))
+        yield
 
 
 def _is_number(text: str) -> bool:
@@ -233,7 +251,7 @@ def _run_command(argv: list[str] | None) -> int:
         with contextlib.suppress(AttributeError, ValueError):
             stream.reconfigure(errors="replace")
     # a mesh sent to standard output must not have messages mixed into it
-    talk = redirect_stdout(sys.stderr) if _writes_to_stdout(args) else nullcontext()
+    talk = _messages_kept_off(_output_streams(args))
     try:
         with talk:
             result = app(args=args, prog_name="isoconvert", standalone_mode=False)
