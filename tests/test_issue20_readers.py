@@ -766,3 +766,30 @@ def test_metaimage_non_finite_offset_can_be_set_with_origin(tmp_path):
     assert "Offset [nan, 0.0, inf] in the MetaImage header ignored; using 0; set --origin" in (
         alone.notes
     )
+
+
+@pytest.mark.parametrize(
+    ("pixdim", "spacing", "says"),
+    [
+        (0.0, 1.0, "pixdim x 0 is not a voxel size; using 1"),
+        (-3.0, 3.0, "pixdim x -3 is negative; using 3"),
+        (float("nan"), 1.0, "pixdim x nan is not a voxel size"),
+    ],
+)
+def test_nifti_voxel_size_that_is_none_is_named_in_a_note(tmp_path, pixdim, spacing, says):
+    """nibabel replaces such a pixdim while loading (0 by 1, -3 by 3) and only logs it:
+    the volume's notes must say what became of it (README: metadata that makes no
+    sense is ignored with a note)."""
+    nib = pytest.importorskip("nibabel")
+    img = nib.Nifti1Image(np.zeros((4, 5, 6), np.uint8), np.diag([2.0, 2.0, 2.0, 1.0]))
+    img.header["sform_code"] = 0
+    img.header["qform_code"] = 1
+    img.header["pixdim"][1] = pixdim
+    path = tmp_path / "v.nii"
+    # written byte by byte: nibabel's own save would check (and fix) pixdim first
+    path.write_bytes(img.header.binaryblock + b"\0" * 4 + bytes(4 * 5 * 6))
+    vol = read_volume(path)
+    assert vol.spacing[0] == spacing and list(vol.spacing[1:]) == [2.0, 2.0]
+    assert any(says in note for note in vol.notes), vol.notes
+    placement = [n for n in vol.notes if "placement" in n or "degenerate" in n]
+    assert len(placement) == 1, vol.notes  # one word on where it is, not two that disagree

@@ -116,6 +116,8 @@ def read_nifti(path: Path, options: ReadOptions) -> Volume:
         notes.append(f"samples scaled by scl_slope {slope:g}, scl_inter {inter:g}")
     affine, which = _affine(header)
     notes.append(which)
+    if not which.startswith("placement from the sform"):  # placed by pixdim's voxel sizes
+        notes.extend(_voxel_size_notes(_raw_pixdim(path, header), min(len(xyz), 3)))
     notes.append(_RAS_NOTE)
     unit = _UNITS.get(header.get_xyzt_units()[0])
     flat = len(xyz) == 2 or xyz[2] == 1
@@ -214,9 +216,43 @@ def _affine(header) -> tuple[np.ndarray, str]:
             return qform, f"placement from the qform (qform_code {qform_code}; no sform)"
         passed.append(f"qform unusable ({why})")
     why = "; ".join(passed) if passed else "no sform or qform"
-    return header.get_base_affine(), (
+    base = header.get_base_affine()
+    if _unusable(base) is not None:  # a voxel size is not finite: 1 there, the others kept
+        header = header.copy()
+        sizes = np.asarray(header["pixdim"][1:4], dtype=np.float64)
+        header["pixdim"][1:4] = np.where(np.isfinite(sizes) & (sizes > 0), sizes, 1.0)
+        base = header.get_base_affine()
+    return base, (
         f"placement from the voxel sizes only ({why}; nibabel's fallback, centred, x flipped)"
     )
+
+
+def _raw_pixdim(path: Path, header) -> np.ndarray:
+    """pixdim as the file holds it: nibabel's loading replaces a 0 by 1 and a
+    negative value by its size (with a logged warning), so the header it gives
+    has lost them."""
+    from nibabel.openers import ImageOpener
+
+    try:
+        with ImageOpener(str(path)) as fh:
+            return np.asarray(type(header).from_fileobj(fh, check=False)["pixdim"])
+    except Exception:  # unreadable twice is unreadable once: the loaded header will do
+        return np.asarray(header["pixdim"])
+
+
+def _voxel_size_notes(pixdim: np.ndarray, dims: int) -> list[str]:
+    """Notes on pixdim values that are no voxel size (0, negative, not finite), which
+    nibabel's qform and fallback replace (0 by 1, a negative one by its size)."""
+    notes = []
+    for axis, value in zip("xyz"[:dims], pixdim[1 : dims + 1], strict=True):
+        value = float(value)
+        if not np.isfinite(value):
+            notes.append(f"pixdim {axis} {value} is not a voxel size; using 1 (set --spacing)")
+        elif value == 0:
+            notes.append(f"pixdim {axis} 0 is not a voxel size; using 1 (set --spacing)")
+        elif value < 0:
+            notes.append(f"pixdim {axis} {value:g} is negative; using {-value:g} (set --spacing)")
+    return notes
 
 
 def _unusable(affine: np.ndarray) -> str | None:
