@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import glob
 import os
 import re
 import shutil
+import socket
 import stat
 import tempfile
 from collections.abc import Iterable, Iterator
@@ -251,13 +253,16 @@ def atomic_output(
     stream = output_stream(path)
     folder = tempfile.gettempdir() if stream is not None else path.parent
     # the temporary name always fits the folder's limit, however long the user's is
-    keep = _name_max(Path(folder)) - len(".") - len(".XXXXXXXX.part") - 8
+    owner = _owner_tag()
+    keep = _name_max(Path(folder)) - len(".") - len(f".{owner}-XXXXXXXX.part") - 8
     stem = os.fsencode(path.name)[: max(keep, 1)].decode("utf-8", "ignore") or "out"
+    if stream is None:
+        _remove_stale_parts(Path(folder), stem)
     # a signal between making the file and entering the block that removes it
     # would leave it behind: it is held until then (isoconvert.signals)
     signals.defer()
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{stem}.", suffix=".part")
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{stem}.{owner}-", suffix=".part")
     except OSError as exc:
         signals.resume()
         raise OutputError(f"{path}: cannot create a file there ({exc.strerror})") from None
@@ -295,6 +300,43 @@ def atomic_output(
     except BaseException:
         _remove(tmp)
         raise
+
+
+def _owner_tag() -> str:
+    """``HOST~PID`` of this process, in its temporary files' names: a file left by
+    a process that died without cleaning up (SIGKILL, a power cut) can then be
+    told from one still being written, on this host, by another process."""
+    host = re.sub(r"[^A-Za-z0-9-]", "", socket.gethostname())[:32] or "host"
+    return f"{host}~{os.getpid()}"
+
+
+_OWNER = re.compile(r"\.(?P<host>[A-Za-z0-9-]+)~(?P<pid>\d+)-[^.]+\.part$")
+
+
+def _remove_stale_parts(folder: Path, stem: str) -> None:
+    """Remove the temporary files of earlier writes of this output whose process,
+    on this host, is gone (killed by SIGKILL, or the machine went down)."""
+    host = _owner_tag().split("~")[0]
+    try:
+        candidates = list(folder.glob(f".{glob.escape(stem)}.*.part"))
+    except OSError:
+        return
+    for candidate in candidates:
+        found = _OWNER.search(candidate.name)
+        if found is None or found["host"] != host or _alive(int(found["pid"])):
+            continue  # not ours to judge: another host's, or still being written
+        with contextlib.suppress(OSError):
+            candidate.unlink()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process: alive
+        return True
+    return True
 
 
 def _copy_to_stream(source: BinaryIO, stream: int | str) -> None:

@@ -23,19 +23,26 @@ def _stop_while_starting(signum: int, frame: object) -> None:
     raise SystemExit(128 + signum)
 
 
-def _quiet_start() -> None:
-    """Handlers for the signals that stop a run, where the process does not ignore them."""
+def _quiet_start() -> dict:
+    """Handlers for the signals that stop a run, where the process does not ignore
+    them; returns the handlers they replace."""
+    before = {}
     for name in ("SIGINT", "SIGTERM", "SIGHUP"):
         sig = getattr(signal, name, None)
         if sig is not None and signal.getsignal(sig) is not signal.SIG_IGN:
-            signal.signal(sig, _stop_while_starting)
+            before[sig] = signal.signal(sig, _stop_while_starting)
+    return before
 
 
 def run() -> None:
     """Console-script entry point: ``isoconvert ARGS``."""
-    _quiet_start()
+    before = _quiet_start()
     from .cli import main
 
+    # the command line's own handling takes over from here (isoconvert.signals
+    # installs it only over Python's defaults)
+    for sig, handler in before.items():
+        signal.signal(sig, handler)
     sys.exit(main())
 
 

@@ -557,3 +557,25 @@ def test_dev_stderr_gets_the_mesh_and_no_notes(tmp_path):
         )
     assert done.returncode == 0
     assert sent.read_bytes() == reference.read_bytes()
+
+
+def test_a_part_file_left_by_a_killed_run_goes_with_the_next_write(tmp_path, capsys):
+    """SIGKILL (or a power cut) leaves a hidden temporary file no handler could
+    remove; the next write of that output removes it when its process, on this
+    host, is gone, and never one still being written or another host's."""
+    import socket
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()  # a process id that no longer runs
+    host = "".join(c for c in socket.gethostname() if c.isalnum() or c == "-")[:32]
+    stale = tmp_path / f".m.ply.{host}~{gone.pid}-k1ll3d.part"
+    running = tmp_path / f".m.ply.{host}~{os.getpid()}-w0rk1n.part"
+    elsewhere = tmp_path / f".m.ply.otherhost~{gone.pid}-n0tm1n.part"
+    other = tmp_path / f".n.ply.{host}~{gone.pid}-0th3rs.part"
+    for path in (stale, running, elsewhere, other):
+        path.write_bytes(b"half a mesh")
+    code, _, err = run(capsys, "convert", SPHERE, "-l", "127.5", "-o", tmp_path / "m.ply")
+    assert code == 0, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        ["m.ply", running.name, elsewhere.name, other.name]
+    )
