@@ -579,3 +579,11 @@ def test_a_part_file_left_by_a_killed_run_goes_with_the_next_write(tmp_path, cap
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
         ["m.ply", running.name, elsewhere.name, other.name]
     )
+
+
+@pytest.mark.parametrize("command", ["convert", "batch"])
+def test_a_word_for_max_memory_is_a_usage_error(tmp_path, capsys, command):
+    code, _, err = run(capsys, command, SPHERE, "-l", "127.5", "-o", tmp_path / "o",
+                       "--max-memory", "lots")  # fmt: skip
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and "'lots'" in lines[0] and "--max-memory" in lines[0]

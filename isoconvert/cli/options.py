@@ -580,4 +580,7 @@ def _bytes(text: str) -> int:
             return int(float(t[:-1]) * units[t[-1]])
         return int(float(t))
     except ValueError:
-        raise VolumeError(f"--max-memory takes a size such as 8G or 512M, got {text!r}") from None
+        # a word where a number goes: a command line that cannot be parsed (exit 2)
+        raise typer.BadParameter(
+            f"a size such as 8G or 512M, got {text!r}", param_hint="'--max-memory'"
+        ) from None
