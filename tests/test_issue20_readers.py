@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from isoconvert import read_volume
-from isoconvert.errors import FormatError, VolumeError
+from isoconvert.errors import FormatError, IsoconvertError, VolumeError
 
 
 def _abs(*paths) -> set[str]:
@@ -793,3 +793,18 @@ def test_nifti_voxel_size_that_is_none_is_named_in_a_note(tmp_path, pixdim, spac
     assert any(says in note for note in vol.notes), vol.notes
     placement = [n for n in vol.notes if "placement" in n or "degenerate" in n]
     assert len(placement) == 1, vol.notes  # one word on where it is, not two that disagree
+
+
+@pytest.mark.parametrize("size", [2**53 + 1, 2**63 - 1, 2**64, 10**23 - 1])
+def test_nrrd_sizes_past_64_bit_floats_are_named_exactly(tmp_path, size):
+    """pynrrd reads sizes through 64-bit numbers: 2**53 + 1 came out as 2**53 and
+    2**63 - 1 or more as -9223372036854775808 ("all must be >= 1")."""
+    path = tmp_path / "big.nrrd"
+    path.write_text(
+        f"NRRD0004\ntype: uint8\ndimension: 3\nsizes: {size} 1 1\nencoding: raw\n"
+        "endian: little\n\n"
+    )
+    with pytest.raises(IsoconvertError) as caught:
+        read_volume(path)
+    message = str(caught.value)
+    assert f"sizes {size} 1 1" in message and f"need {size}" in message, message

@@ -215,7 +215,26 @@ def _read_header(path: Path) -> _Header:
         raise FormatError(f"{path}: not a readable NRRD header ({one_line(exc)})") from None
     if listed is not None and ("data file" in fields or "datafile" in fields):
         raise FormatError(f"{path}: the NRRD header has two 'data file' fields; keep one")
-    return _Header(dict(fields), total, listed, subdim)
+    fields = dict(fields)
+    exact = _exact_sizes(lines)
+    if exact is not None:
+        fields["sizes"] = exact
+    return _Header(fields, total, listed, subdim)
+
+
+def _exact_sizes(lines: list[str]) -> list[int] | None:
+    """The ``sizes`` field as Python integers: pynrrd parses it through 64-bit
+    numbers, which round sizes past 2**53 and wrap those past 2**63, so a
+    message would name a size the header never declared. None when the field
+    is absent or not whole numbers (pynrrd's reading then stands)."""
+    for line in lines[1:]:
+        key, sep, value = line.partition(":")
+        if sep and key.strip() == "sizes" and not line.startswith("#"):
+            try:
+                return [int(word) for word in value.split()]
+            except ValueError:
+                return None
+    return None
 
 
 def _check_declared_size(path: Path, header: dict) -> None:
