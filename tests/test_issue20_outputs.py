@@ -587,3 +587,19 @@ def test_a_word_for_max_memory_is_a_usage_error(tmp_path, capsys, command):
                        "--max-memory", "lots")  # fmt: skip
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1 and "'lots'" in lines[0] and "--max-memory" in lines[0]
+
+
+def test_batch_says_when_a_users_picture_keeps_a_thumbnail_out(tmp_path, capsys):
+    pytest.importorskip("vtk")
+    from PIL import Image
+
+    folder = tmp_path / "in"
+    folder.mkdir()
+    (folder / "sphere.nrrd").write_bytes(Path(SPHERE).read_bytes())
+    Image.new("RGB", (4, 4), (200, 10, 10)).save(folder / "sphere.png")
+    before = digest(folder / "sphere.png")
+    code, _, err = run(capsys, "batch", folder, "-o", folder, "-l", "127.5", "--previews")
+    assert code == 0, err
+    assert digest(folder / "sphere.png") == before
+    (note,) = [line for line in err.splitlines() if line.startswith("note:")]
+    assert "sphere.png" in note and "left as it is" in note

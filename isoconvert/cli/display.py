@@ -103,6 +103,8 @@ def _batch_display(quiet: bool, total: int, verbose: bool = False):
         line = None
         if outcome.status in ("failed", "check-failed"):  # errors, even with --quiet
             line = f"isoconvert: {outcome.message}"
+        elif outcome.status == "ok" and outcome.message and not quiet and not verbose:
+            line = f"note: {outcome.message}"  # e.g. a thumbnail left out, and why
         elif verbose and not quiet:
             line = (
                 f"[{count[0]}/{total}] {outcome.status} {outcome.input} -> {outcome.output} "
