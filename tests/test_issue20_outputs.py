@@ -603,3 +603,17 @@ def test_batch_says_when_a_users_picture_keeps_a_thumbnail_out(tmp_path, capsys)
     assert digest(folder / "sphere.png") == before
     (note,) = [line for line in err.splitlines() if line.startswith("note:")]
     assert "sphere.png" in note and "left as it is" in note
+
+
+def test_formats_columns_line_up(capsys):
+    from isoconvert.readers import READERS
+    from isoconvert.writers import WRITERS
+
+    code, out, _ = run(capsys, "formats")
+    assert code == 0
+    starts = set()
+    for registry in (READERS, WRITERS):
+        for name, entry in registry.items():
+            (line,) = [ln for ln in out.splitlines() if ln.startswith(f"  {name} ")]
+            starts.add(line.index(entry.summary))
+    assert len(starts) == 1  # every summary starts in one column (metaimage, geojson did not)

@@ -235,12 +235,16 @@ def warmup() -> None:
 
 def formats() -> None:
     """List input formats, output formats and extraction methods."""
-    print("input formats:")
-    for name, reader in READERS.items():
-        print(f"  {name:<6} {' '.join(reader.suffixes):<18} {reader.summary}")
-    print("output formats:")
-    for name, writer in WRITERS.items():
-        print(f"  {name:<6} {' '.join(writer.suffixes):<18} {writer.summary}")
+    tables = {"input formats": list(READERS.items()), "output formats": list(WRITERS.items())}
+    rows = [(n, " ".join(e.suffixes)) for entries in tables.values() for n, e in entries]
+    # one column width for both tables, from the longest name and suffix list
+    name_width = max(len(n) for n, _ in rows)
+    suffix_width = max(len(s) for _, s in rows)
+    for title, entries in tables.items():
+        print(f"{title}:")
+        for name, entry in entries:
+            suffixes = " ".join(entry.suffixes)
+            print(f"  {name:<{name_width}} {suffixes:<{suffix_width}} {entry.summary}")
     print("methods:")
     _print_methods()
 
