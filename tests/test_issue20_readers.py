@@ -801,8 +801,7 @@ def test_nrrd_sizes_past_64_bit_floats_are_named_exactly(tmp_path, size):
     2**63 - 1 or more as -9223372036854775808 ("all must be >= 1")."""
     path = tmp_path / "big.nrrd"
     path.write_text(
-        f"NRRD0004\ntype: uint8\ndimension: 3\nsizes: {size} 1 1\nencoding: raw\n"
-        "endian: little\n\n"
+        f"NRRD0004\ntype: uint8\ndimension: 3\nsizes: {size} 1 1\nencoding: raw\nendian: little\n\n"
     )
     with pytest.raises(IsoconvertError) as caught:
         read_volume(path)
