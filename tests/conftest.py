@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +54,19 @@ def read_real_scan(name: str):
     if vol.ndim != 3:
         pytest.skip("a 2D image")
     return vol
+
+
+def load_import_graph():
+    """The bench/import_graph.py module (a script, not a package), loaded once."""
+    if "import_graph" in sys.modules:
+        return sys.modules["import_graph"]
+    spec = importlib.util.spec_from_file_location(
+        "import_graph", ROOT / "bench" / "import_graph.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
 
 
 def load_samples_module():

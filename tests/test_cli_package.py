@@ -9,29 +9,18 @@ tests/test_layers.py.
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import pytest
+from conftest import load_import_graph
 
 ROOT = Path(__file__).resolve().parents[1]
 SHELL_LIBRARIES = {"typer", "rich", "click"}
 
 
-def _load_graph_module():
-    spec = importlib.util.spec_from_file_location(
-        "import_graph", ROOT / "bench" / "import_graph.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
 def graph():
-    return _load_graph_module().build(ROOT / "isoconvert")
+    return load_import_graph().build(ROOT / "isoconvert")
 
 
 def _in_cli(name: str) -> bool:

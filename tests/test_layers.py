@@ -12,28 +12,17 @@ reading on small packages written here, whose graphs are worked out by hand.
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import load_import_graph
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "isoconvert"
 
 
-def _load_graph_module():
-    spec = importlib.util.spec_from_file_location(
-        "import_graph", ROOT / "bench" / "import_graph.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
-
-
-ig = _load_graph_module()
+ig = load_import_graph()
 
 #: The lower layers (ARCHITECTURE.md, Layers) and what they must never reach.
 LOWER = ("extract", "readers", "writers", "post", "meshfile", "report")
