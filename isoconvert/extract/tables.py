@@ -125,7 +125,10 @@ def square_segments(signs: tuple[bool, ...], rule: str) -> list[tuple[int, int]]
 
 
 def face_walk(
-    corners: np.ndarray, faces: list[list[int]], positive: list[bool], rule: str
+    corners: np.ndarray,
+    faces: list[list[int]],
+    positive: list[bool],
+    rule: str | list[str],
 ) -> list[list[tuple[int, int]]]:
     """Isosurface polygons of a convex cell, by walking its faces.
 
@@ -137,8 +140,9 @@ def face_walk(
         Each face's corners, in cyclic order (either direction).
     positive : list of bool
         Sign of each corner.
-    rule : str
-        Ambiguous-face rule.
+    rule : str or list of str
+        Ambiguous-face rule: one for every face, or one per face (the
+        trilinear tables decide each face by its own asymptotic decider).
 
     Returns
     -------
@@ -149,10 +153,11 @@ def face_walk(
     """
     centre = corners.mean(axis=0)
     following = {}
-    for face in faces:
+    rules = [rule] * len(faces) if isinstance(rule, str) else rule
+    for face, face_rule in zip(faces, rules, strict=True):
         outward = corners[face].mean(axis=0) - centre
         n = len(face)
-        for a, b in square_segments(tuple(positive[c] for c in face), rule):
+        for a, b in square_segments(tuple(positive[c] for c in face), face_rule):
             ea = tuple(sorted((face[a], face[(a + 1) % n])))
             eb = tuple(sorted((face[b], face[(b + 1) % n])))
             mid_a = corners[list(ea)].mean(axis=0)
