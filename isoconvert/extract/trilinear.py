@@ -78,6 +78,7 @@ from functools import cache
 
 import numpy as np
 
+from ..graph import connected_components
 from .tables import (
     _CUBE_EDGE_INDEX,
     CUBE_EDGES,
@@ -118,30 +119,26 @@ def ambiguous_faces(config: int) -> int:
     return mask
 
 
-def _corner_components(config: int, faces: int, sign: int) -> list[int]:
-    """Components of the corners of one sign on the cube's boundary: joined by
-    an edge with both ends of that sign, or across a face that joins them."""
-    parent = list(range(8))
-
-    def find(v: int) -> int:
-        while parent[v] != v:
-            v = parent[v]
-        return v
+def _boundary_joins(config: int, faces: int, sign: int) -> list[tuple[int, int]]:
+    """Pairs of corners of one sign that the cube's boundary joins: the two ends
+    of an edge with both of that sign, and the diagonal of a face that joins
+    them (``faces``, as in the table)."""
 
     def has(v: int) -> bool:
         return (config >> v) & 1 == sign
 
-    for a, b in CUBE_EDGES:
-        if has(int(a)) and has(int(b)):
-            parent[find(int(a))] = find(int(b))
+    pairs = [(int(a), int(b)) for a, b in CUBE_EDGES if has(int(a)) and has(int(b))]
+    ambiguous = ambiguous_faces(config)
     for f, (c00, c10, c01, c11) in enumerate(FACE_CORNERS):
-        if not (ambiguous_faces(config) >> f) & 1:
-            continue
-        joins_positive = (faces >> f) & 1 == 1
-        if joins_positive == (sign == 1):
-            pair = (c00, c11) if has(int(c00)) else (c10, c01)
-            parent[find(int(pair[0]))] = find(int(pair[1]))
-    return [find(v) for v in range(8)]
+        if (ambiguous >> f) & 1 and ((faces >> f) & 1 == 1) == (sign == 1):
+            pairs.append((int(c00), int(c11)) if has(int(c00)) else (int(c10), int(c01)))
+    return pairs
+
+
+def _components(pairs: list[tuple[int, int]]) -> np.ndarray:
+    """(8,) label of each corner's component under the joins ``pairs``."""
+    u, v = np.array(pairs, dtype=np.int64).reshape(-1, 2).T
+    return connected_components(8, u, v)
 
 
 @cache
@@ -152,11 +149,8 @@ def needs_interior_test(config: int) -> bool:
     if ambiguous_faces(config):
         return True
     for sign in (0, 1):
-        roots = {
-            r
-            for v, r in enumerate(_corner_components(config, 0, sign))
-            if (config >> v) & 1 == sign
-        }
+        labels = _components(_boundary_joins(config, 0, sign))
+        roots = {int(labels[v]) for v in range(8) if (config >> v) & 1 == sign}
         if len(roots) > 1:
             return True
     return False
@@ -395,20 +389,13 @@ def trilinear_cube(values: np.ndarray, level: float) -> list[tuple[list, list[in
     config = sum(1 << v for v in range(8) if values[v] >= level)
     faces = face_decisions(values, level, config)
     loops, corners, disks, tubes = entry(config, faces)
-    comps = {s: _corner_components(config, faces, s) for s in (0, 1)}
-    parent = {s: list(range(8)) for s in (0, 1)}
-
-    def find(s: int, v: int) -> int:
-        v = comps[s][v]
-        while parent[s][v] != v:
-            v = parent[s][v]
-        return v
-
+    joins = {sign: _boundary_joins(config, faces, sign) for sign in (0, 1)}
     for sign, u, v in interior_joins(values, level):
-        parent[sign][find(sign, u)] = find(sign, v)
+        joins[sign].append((u, v))
+    labels = {sign: _components(pairs) for sign, pairs in joins.items()}
     groups: dict[tuple[int, int], list[int]] = {}
     for i, (p, n) in enumerate(corners):
-        groups.setdefault((find(1, p), find(0, n)), []).append(i)
+        groups.setdefault((int(labels[1][p]), int(labels[0][n])), []).append(i)
     pieces = []
     for members in groups.values():
         if len(members) == 2:
