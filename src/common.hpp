@@ -33,6 +33,18 @@ inline double edge_fraction(double s0, double s1, double level, double offset) {
   return std::min(std::max(t, offset), 1.0 - offset);
 }
 
+// The asymptotic decider (Nielson and Hamann 1991; book section 2.2.5): on a
+// square with corner values f (00, 10, 01, 11: the lower in-plane axis first)
+// whose diagonal corners share signs, the bilinear interpolant joins the
+// positive corners when its saddle value is >= level. Marching Squares'
+// `asymptotic` rule and Marching Cubes' `trilinear` faces both call this one
+// test, in this operand order, so a slice and a cube cut a grid face alike.
+inline bool asymptotic_joins_positive(double f00, double f10, double f01, double f11,
+                                      double level) {
+  const double saddle = (f00 * f11 - f10 * f01) / (f00 + f11 - f10 - f01);
+  return saddle >= level;
+}
+
 inline int popcount(std::uint64_t x) { return __builtin_popcountll(x); }
 inline int ctz(std::uint64_t x) { return __builtin_ctzll(x); }  // x != 0
 inline int clz(std::uint64_t x) { return __builtin_clzll(x); }  // x != 0

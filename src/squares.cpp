@@ -43,8 +43,7 @@ inline int square_rule(int rule, unsigned config, double f0, double f1, double f
                        double level) {
   if (rule != ASYMPTOTIC) return rule;
   if (config != 6 && config != 9) return SEPARATE_POSITIVE;
-  const double saddle = (f0 * f3 - f1 * f2) / (f0 + f3 - f1 - f2);
-  return saddle >= level ? SEPARATE_NEGATIVE : SEPARATE_POSITIVE;
+  return asymptotic_joins_positive(f0, f1, f2, f3, level) ? SEPARATE_NEGATIVE : SEPARATE_POSITIVE;
 }
 
 // The bit masks of one word (64 positions x = 64 w + q) of a cube row, from
