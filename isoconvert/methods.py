@@ -27,6 +27,13 @@ NO_DEGENERATE_OFFSET = 1e-3
 AMBIGUITY_RULES = ("separate-positive", "separate-negative")
 #: Rules for ambiguous squares: those of cubes, and the asymptotic decider.
 SQUARE_AMBIGUITY_RULES = (*AMBIGUITY_RULES, "asymptotic")
+#: The cubes' rule that follows the trilinear interpolant (faces by the
+#: asymptotic decider, the inside by its body saddles; extract/trilinear.py).
+TRILINEAR = "trilinear"
+#: Rules cubes take: the fixed ones, and the trilinear topology.
+CUBE_AMBIGUITY_RULES = (*AMBIGUITY_RULES, TRILINEAR)
+#: Every rule some method takes (the CLI's choices).
+ALL_AMBIGUITY_RULES = (*SQUARE_AMBIGUITY_RULES, TRILINEAR)
 
 
 # The record of a method lives here, with the table of them, so that the table
@@ -86,10 +93,13 @@ EXTRACTORS.declare(
 )
 
 __all__ = [
+    "ALL_AMBIGUITY_RULES",
     "AMBIGUITY_RULES",
+    "CUBE_AMBIGUITY_RULES",
     "EXTRACTORS",
     "Extractor",
     "NO_DEGENERATE_OFFSET",
     "PLUGIN_GROUP",
     "SQUARE_AMBIGUITY_RULES",
+    "TRILINEAR",
 ]

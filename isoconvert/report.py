@@ -113,6 +113,9 @@ class Report:
         "grid" when boundaries were judged against the volume's grid,
         "bounding box" when the mesh records that a grid cut it but not which,
         else "none" (every open boundary is a hole).
+    extraction : dict
+        What the mesh records of how it was extracted (:func:`extraction_record`);
+        empty when it records nothing.
     """
 
     kind: str
@@ -124,6 +127,7 @@ class Report:
     boundary_frame: str
     source: str = ""
     notes: list[str] = field(default_factory=list)
+    extraction: dict = field(default_factory=dict)
 
     def failures(self, required: list[str]) -> list[str]:
         """Names among ``required`` whose check failed."""
@@ -142,6 +146,7 @@ class Report:
             "topology": self.topology,
             "measures": self.measures,
             "notes": self.notes,
+            **({"extraction": self.extraction} if self.extraction else {}),
         }
 
 
@@ -353,6 +358,35 @@ def _pos(p) -> list[float]:
 # --- triangles ---------------------------------------------------------------------------
 
 
+#: What each ambiguity rule makes of a cube's topology, for the report.
+_RULE_TOPOLOGY = {
+    "trilinear": "trilinear interpolant",
+    "asymptotic": "bilinear interpolant on each slice",
+    "separate-positive": "fixed rule (ambiguous faces separate the positive corners)",
+    "separate-negative": "fixed rule (ambiguous faces separate the negative corners)",
+}
+
+
+def extraction_record(info: dict) -> dict:
+    """``method``, ``ambiguity`` and the ``topology`` that rule follows, as
+    ``info`` (an extracted mesh's, or what a file's header records) has them.
+
+    Returns
+    -------
+    dict
+        Empty when ``info`` records no method or no rule for ambiguous faces
+        (tetra has none; STL and meshio's formats do not give it
+        back); ``topology`` only for a known rule.
+    """
+    method, rule = info.get("method"), info.get("ambiguity")
+    if not isinstance(method, str) or not isinstance(rule, str):
+        return {}
+    out = {"method": method, "ambiguity": rule}
+    if rule in _RULE_TOPOLOGY:
+        out["topology"] = _RULE_TOPOLOGY[rule]
+    return out
+
+
 def check_mesh(
     mesh: Mesh | object, *, examples: int = 5, source: str = "", grid: dict | None = None
 ) -> Report:
@@ -421,6 +455,7 @@ def check_mesh(
         for check in LABEL_CHECKS:
             report.checks[check] = all(surface[check] for surface in per_label)
         report.notes.append(LABEL_NOTE)
+    report.extraction = extraction_record(mesh.info)
     unit = mesh.info.get("unit")
     if isinstance(unit, str) and unit:
         report.measures["unit"] = unit  # of lengths; areas and volumes in its square and cube
@@ -854,6 +889,13 @@ def format_report(report: Report) -> str:
     then the notes (among them why boundaries were judged against the bounding box)."""
     c = report.counts
     lines = [f"{report.source or 'mesh'}: {report.kind}"]
+    made = report.extraction
+    if made:
+        lines.append(
+            f"  extracted by {made['method']}"
+            + (f", --ambiguity {made['ambiguity']}" if "ambiguity" in made else "")
+            + (f" (topology: {made['topology']})" if "topology" in made else "")
+        )
     if report.kind == "triangles":
         lines.append(
             f"  {c['vertices']:,} vertices ({c['merged_vertices']:,} merged at equal positions), "

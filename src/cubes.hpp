@@ -2,6 +2,7 @@
 
 #include "placement.hpp"
 #include "rows.hpp"
+#include "trilinear.hpp"
 
 namespace iso {
 
@@ -13,18 +14,29 @@ struct CubeTable {
 };
 
 struct CubesCount {
-  // per row: bipolar y- and z-edges, triangles of the cubes above and behind it
-  std::vector<i32> cy, cz, ct;
+  // per row: bipolar y- and z-edges, triangles and interior vertices of the
+  // cubes above and behind it
+  std::vector<i32> cy, cz, ct, ci;
+  // in the trilinear mode, for the filling pass: the pieces of each special
+  // cube (a word of Walk::pack_pieces), row by row by increasing x, in the
+  // buffer of the thread that counted the row; per row, that thread and where
+  // its words start
+  std::vector<std::vector<std::uint64_t>> found;
+  std::vector<i32> found_by;
+  std::vector<i64> found_at;
   i64 vertices = 0, triangles = 0;
 };
 
+// `trilinear`: null for a fixed ambiguity rule (`table` then decides every
+// cube); else its special configurations take the trilinear tests instead.
 template <class T>
-void count_cubes(const T *f, const RowScan &s, const CubeTable &table, int threads,
-                 CubesCount &out);
+void count_cubes(const T *f, const RowScan &s, const CubeTable &table,
+                 const TrilinearTable *trilinear, int threads, CubesCount &out);
 
 // verts (V, 3), ids (V,), tris (C, 3), sized from `counts`.
 template <class T>
-void fill_cubes(const T *f, const RowScan &s, const CubeTable &table, const CubesCount &counts,
-                const Placement &where, int threads, double *verts, i64 *ids, i64 *tris);
+void fill_cubes(const T *f, const RowScan &s, const CubeTable &table,
+                const TrilinearTable *trilinear, const CubesCount &counts, const Placement &where,
+                int threads, double *verts, i64 *ids, i64 *tris);
 
 }  // namespace iso

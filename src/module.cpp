@@ -6,6 +6,8 @@
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/tuple.h>
 
+#include <vector>
+
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -50,6 +52,104 @@ iso::CubeTable cube_table(const Int64s &counts, const Int64s &edges) {
   return t;
 }
 
+using Int32s = nb::ndarray<const std::int32_t, nb::c_contig, nb::device::cpu>;
+
+std::vector<iso::i32> int32s(const Int32s &a, const char *name, std::size_t size = 0) {
+  if (size && a.size() != size) {
+    throw std::invalid_argument(std::string("trilinear table: ") + name + " has the wrong size");
+  }
+  return std::vector<iso::i32>(a.data(), a.data() + a.size());
+}
+
+// A trilinear table from trilinear.kernel_table()'s arrays, checked so that
+// the kernel, which trusts it, never reads outside it.
+iso::TrilinearTable trilinear_table(const Int32s &special, const Int32s &entry,
+                                    const Int32s &loops, const Int32s &corners,
+                                    const Int32s &disk, const Int32s &tube,
+                                    const Int32s &piece_tris, const Int32s &piece_inner,
+                                    const Int32s &tris, const Int32s &inner,
+                                    const Int32s &edges, const Int32s &face_corners) {
+  auto bad = [](const char *what) {
+    throw std::invalid_argument(std::string("trilinear table: ") + what);
+  };
+  iso::TrilinearTable t;
+  const std::vector<iso::i32> sp = int32s(special, "special", 256);
+  for (int c = 0; c < 256; ++c) t.special[c] = sp[c] != 0;
+  t.entry = int32s(entry, "entry", 256 * 64);
+  t.loops = int32s(loops, "loops");
+  const std::size_t n = t.loops.size();
+  t.corners = int32s(corners, "corners", 8 * n);
+  t.disk = int32s(disk, "disk", 4 * n);
+  t.tube = int32s(tube, "tube", 6 * n);
+  t.piece_tris = int32s(piece_tris, "piece_tris");
+  t.piece_inner = int32s(piece_inner, "piece_inner", t.piece_tris.size());
+  t.tris = int32s(tris, "tris");
+  t.inner = int32s(inner, "inner");
+  const std::vector<iso::i32> ed = int32s(edges, "edges", 24), fc = int32s(face_corners, "faces", 24);
+  for (int e = 0; e < 12; ++e) {
+    t.edges[e][0] = ed[2 * e];
+    t.edges[e][1] = ed[2 * e + 1];
+    const int a = ed[2 * e], b = ed[2 * e + 1], x = a ^ b;
+    if (a < 0 || a > 7 || b <= a || b > 7 || (x != 1 && x != 2 && x != 4)) bad("edges");
+  }
+  for (int f = 0; f < 6; ++f) {
+    for (int q = 0; q < 4; ++q) {
+      t.face_corners[f][q] = fc[4 * f + q];
+      if (fc[4 * f + q] < 0 || fc[4 * f + q] > 7) bad("faces");
+    }
+  }
+  for (const iso::i32 e : t.entry) {
+    if (e < -1 || e >= iso::i32(n)) bad("entry out of range");
+  }
+  const iso::i64 pieces = iso::i64(t.piece_tris.size()) - 1;
+  // the kernel packs 4 piece numbers of 15 bits in a word
+  if (pieces < 0 || pieces >= (1 << 15) || t.piece_tris[0] != 0 || t.piece_inner[0] != 0) bad("piece starts");
+  for (iso::i64 p = 0; p < pieces; ++p) {
+    const iso::i32 t0 = t.piece_tris[p], t1 = t.piece_tris[p + 1];
+    const iso::i32 i0 = t.piece_inner[p], i1 = t.piece_inner[p + 1];
+    if (t1 < t0 || 3 * iso::i64(t1) > iso::i64(t.tris.size()) || i1 < i0 || i1 - i0 > 16 ||
+        i1 > iso::i32(t.inner.size())) {
+      bad("piece starts");
+    }
+    for (iso::i64 u = 3 * iso::i64(t0); u < 3 * iso::i64(t1); ++u) {
+      if (t.tris[u] < 0 || t.tris[u] >= 12 + (i1 - i0)) bad("a triangle names no vertex");
+    }
+  }
+  for (const iso::i32 mask : t.inner) {
+    if (mask <= 0 || mask >= (1 << 12)) bad("interior vertex mask");
+  }
+  auto piece = [&](iso::i32 p) { return p >= 0 && p < pieces; };
+  for (std::size_t e = 0; e < n; ++e) {
+    const int l = t.loops[e];
+    if (l < 1 || l > 4) bad("loops");
+    for (int i = 0; i < l; ++i) {
+      if (!piece(t.disk[4 * e + i])) bad("disk");
+      for (int q = 0; q < 2; ++q) {
+        if (t.corners[8 * e + 2 * i + q] < 0 || t.corners[8 * e + 2 * i + q] > 7) bad("corners");
+      }
+      for (int j = i + 1; j < l; ++j) {
+        if (!piece(t.tube[6 * e + iso::loop_pair(i, j)])) bad("tube");
+      }
+    }
+  }
+  // every face decision a special configuration can take has its entry
+  for (int c = 0; c < 256; ++c) {
+    if (!t.special[c]) continue;
+    int ambiguous = 0;
+    for (int f = 0; f < 6; ++f) {
+      const auto s = [&](int q) { return (c >> t.face_corners[f][q]) & 1; };
+      if (s(0) == s(3) && s(1) == s(2) && s(0) != s(1)) ambiguous |= 1 << f;
+    }
+    for (int faces = 0; faces < 64; ++faces) {
+      if (faces & ~ambiguous) continue;
+      const iso::i32 e = t.entry[64 * c + faces];
+      if (e < 0 || e >= iso::i32(n)) bad("a reachable entry is missing");
+    }
+  }
+  iso::fill_boundary_labels(t);
+  return t;
+}
+
 template <class T>
 void bind_sample_type(nb::module_ &m) {
   m.def(
@@ -64,35 +164,41 @@ void bind_sample_type(nb::module_ &m) {
       "f"_a.noconvert(), "level"_a, "count_equal"_a, "equal_to"_a, "threads"_a);
   m.def(
       "count_cubes",
-      [](Samples3<T> f, const iso::RowScan &s, Int64s counts, Int64s edges, int threads) {
+      [](Samples3<T> f, const iso::RowScan &s, Int64s counts, Int64s edges,
+         const iso::TrilinearTable *trilinear, int threads) {
         check_shape(f, s);
         const iso::CubeTable table = cube_table(counts, edges);
         iso::CubesCount n;
         nb::gil_scoped_release unlocked;
-        iso::count_cubes<T>(f.data(), s, table, threads, n);
+        iso::count_cubes<T>(f.data(), s, table, trilinear, threads, n);
         return n;
       },
-      "f"_a.noconvert(), "scan"_a, "counts"_a, "edges"_a, "threads"_a);
+      "f"_a.noconvert(), "scan"_a, "counts"_a, "edges"_a, "trilinear"_a.none(), "threads"_a);
   m.def(
       "fill_cubes",
       [](Samples3<T> f, const iso::RowScan &s, const iso::CubesCount &n, Int64s counts,
-         Int64s edges, Doubles affine, Doubles origin, Int64s index_origin, Int64s id_dims,
-         double offset, bool reverse, int threads, Out<double> verts, Out<i64> ids,
-         Out<i64> tris) {
+         Int64s edges, const iso::TrilinearTable *trilinear, i64 inner_base, Doubles affine,
+         Doubles origin, Int64s index_origin, Int64s id_dims, double offset, bool reverse,
+         int threads, Out<double> verts, Out<i64> ids, Out<i64> tris) {
         check_shape(f, s);
         if (i64(n.cy.size()) != s.rows()) {
           throw std::invalid_argument("counts are from another row scan");
+        }
+        if ((trilinear != nullptr) != (i64(n.found_at.size()) == s.rows()) && s.rows() > 0) {
+          throw std::invalid_argument("counts were made with another ambiguity rule");
         }
         check_out(verts, n.vertices, 3, "verts");
         check_out(ids, n.vertices, 0, "ids");
         check_out(tris, n.triangles, 3, "tris");
         const iso::CubeTable table = cube_table(counts, edges);
-        const iso::Placement w = placement(affine, origin, index_origin, id_dims, offset, reverse);
+        iso::Placement w = placement(affine, origin, index_origin, id_dims, offset, reverse);
+        w.inner_base = inner_base;
         nb::gil_scoped_release unlocked;
-        iso::fill_cubes<T>(f.data(), s, table, n, w, threads, verts.data(), ids.data(),
-                           tris.data());
+        iso::fill_cubes<T>(f.data(), s, table, trilinear, n, w, threads, verts.data(),
+                           ids.data(), tris.data());
       },
-      "f"_a.noconvert(), "scan"_a, "n"_a, "counts"_a, "edges"_a, "affine"_a, "origin"_a,
+      "f"_a.noconvert(), "scan"_a, "n"_a, "counts"_a, "edges"_a, "trilinear"_a.none(),
+      "inner_base"_a, "affine"_a, "origin"_a,
       "index_origin"_a, "id_dims"_a, "offset"_a, "reverse"_a, "threads"_a,
       "verts"_a.noconvert(), "ids"_a.noconvert(), "tris"_a.noconvert());
 }
@@ -111,6 +217,13 @@ NB_MODULE(_native, m) {
   nb::class_<iso::CubesCount>(m, "CubesCount", "Per-row vertex and triangle counts.")
       .def_ro("vertices", &iso::CubesCount::vertices)
       .def_ro("triangles", &iso::CubesCount::triangles);
+
+  nb::class_<iso::TrilinearTable>(
+      m, "TrilinearTable",
+      "The trilinear-topology cube table (isoconvert.extract.trilinear.kernel_table()).")
+      .def_static("from_arrays", &trilinear_table, "special"_a, "entry"_a, "loops"_a,
+                  "corners"_a, "disk"_a, "tube"_a, "piece_tris"_a, "piece_inner"_a, "tris"_a,
+                  "inner"_a, "edges"_a, "face_corners"_a);
 
 #define ISO_BIND(T) bind_sample_type<T>(m);
   ISO_FOR_EACH_SAMPLE_TYPE(ISO_BIND)

@@ -14,6 +14,10 @@ struct Placement {
   i64 id_dims[2];       // (NX, NY) of the whole grid
   double offset = 0.0;  // vertex offset (fraction of an edge kept from its ends)
   bool reverse = false; // write triangles in the opposite orientation
+  // ids of vertices inside cubes (cubes' trilinear mode) start here, past every
+  // edge id: 3 NX NY NZ; such a vertex of the cube with lowest corner (i, j, k)
+  // is inner_base + 16 (i + NX (j + NY k)) + its slot in the cube
+  i64 inner_base = 0;
 
   // Write the world position of grid point (px, py, pz) (whole-grid index
   // units) to out[0..2].

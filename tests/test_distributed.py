@@ -207,8 +207,14 @@ def _always_dies(job, samples):
 
 @pytest.mark.parametrize(
     "method, options",
-    [("cubes", {}), ("tetra", {}), ("squares", {"axis": "z"}), ("squares", {"axis": "x"})],
-    ids=["cubes", "tetra", "squares-z", "squares-x"],
+    [
+        ("cubes", {}),
+        ("cubes", {"ambiguity": "trilinear"}),
+        ("tetra", {}),
+        ("squares", {"axis": "z"}),
+        ("squares", {"axis": "x"}),
+    ],
+    ids=["cubes", "cubes-trilinear", "tetra", "squares-z", "squares-x"],
 )
 def test_cluster_mesh_is_the_in_memory_mesh(address, monkeypatch, method, options):
     volume = _field()

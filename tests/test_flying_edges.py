@@ -198,7 +198,7 @@ def test_levels_beyond_what_the_type_holds_are_compared_exactly(dtype, level):
 
     scan = _native.scan_rows(zyx, level, False, 0.0, 1)
     counts, table = marching_cubes_table()
-    n = _native.count_cubes(zyx, scan, counts, table, 1)
+    n = _native.count_cubes(zyx, scan, counts, table, None, 1)
     _, bipolar = reference_cubes(zyx, level)
     assert n.vertices == len(bipolar)
 

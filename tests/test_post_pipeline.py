@@ -78,16 +78,16 @@ def test_close_follows_flip_and_a_mirrored_grid():
 @given(
     seed=st.integers(0, 2**32 - 1),
     shape=st.tuples(st.integers(2, 7), st.integers(2, 7), st.integers(2, 7)),
-    rule=st.sampled_from(["separate-positive", "separate-negative"]),
+    rule=st.sampled_from(["separate-positive", "separate-negative", "trilinear"]),
 )
 def test_closed_random_fields_are_watertight_manifold_and_oriented(seed, shape, rule):
     """Every cut of the grid's faces is capped, whatever the signs: the book's
     manifold and orientation properties carry over to the closed surface."""
     f = np.random.default_rng(seed).random(shape)
+    if (f >= 0.5).all() or (f < 0.5).all():
+        return  # no surface at this level: extraction refuses it (tested elsewhere)
     volume = Volume(f)
     mesh = extract(volume, 0.5, ambiguity=rule)
-    if not mesh.n_cells and not (f >= 0.5).any():
-        return
     closed = close_at_grid(mesh, volume, 0.5, ambiguity=rule)
     report = check_mesh(closed).to_dict()
     assert report["checks"]["watertight"] and report["checks"]["oriented"]

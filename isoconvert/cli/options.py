@@ -22,11 +22,11 @@ import typer
 
 from ..checks import CHECK_NAMES
 from ..errors import IsoconvertError, VolumeError
-from ..methods import EXTRACTORS, NO_DEGENERATE_OFFSET, SQUARE_AMBIGUITY_RULES
+from ..methods import ALL_AMBIGUITY_RULES, EXTRACTORS, NO_DEGENERATE_OFFSET
 from ..readers import READERS
 from ..writers import WRITERS
 
-Ambiguity = Enum("Ambiguity", {r.replace("-", "_"): r for r in SQUARE_AMBIGUITY_RULES}, type=str)
+Ambiguity = Enum("Ambiguity", {r.replace("-", "_"): r for r in ALL_AMBIGUITY_RULES}, type=str)
 
 
 Axis = Enum("Axis", {"x": "x", "y": "y", "z": "z"}, type=str)
@@ -234,7 +234,8 @@ class ExtractArgs:
         Ambiguity | None,
         typer.Option(
             help="Rule for ambiguous faces (default separate-positive, as VTK and "
-            "scikit-image); asymptotic: squares only."
+            "scikit-image); asymptotic: squares only; trilinear: cubes with the topology "
+            "of the trilinear interpolant."
         ),
     ] = None
     nan_as: Annotated[

@@ -39,7 +39,13 @@ import numpy as np
 
 from ..errors import IsoconvertError
 from ..mesh import Mesh
-from ..methods import EXTRACTORS, NO_DEGENERATE_OFFSET, PLUGIN_GROUP, Extractor
+from ..methods import (
+    CUBE_AMBIGUITY_RULES,
+    EXTRACTORS,
+    NO_DEGENERATE_OFFSET,
+    PLUGIN_GROUP,
+    Extractor,
+)
 from ..volume import Volume
 from .blocks import BLOCK_METHODS, Blocks, extract_blocks
 from .cubes import marching_cubes
@@ -64,7 +70,7 @@ CUBES = Extractor(
     EXTRACTORS.summary("cubes"),
     (3,),
     marching_cubes,
-    AMBIGUITY_RULES,
+    CUBE_AMBIGUITY_RULES,
     frozenset({"vertex_offset"}),
     prepared=True,
 )

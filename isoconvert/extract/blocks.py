@@ -55,7 +55,7 @@ from ..errors import IsoconvertError, one_line
 from ..grid import LazyGrid, SlabReader, grid_slab_zyx
 from ..memory import FileMap
 from ..mesh import Mesh
-from ..methods import NO_DEGENERATE_OFFSET
+from ..methods import NO_DEGENERATE_OFFSET, TRILINEAR
 from ..runner import Task, TaskFailure, cluster_size, run_in_order, worker_threads
 from ..runner.local import read_ahead
 from ..threads import kernel_threads
@@ -73,6 +73,7 @@ from .prepare import (
     resolve_vertex_offset,
 )
 from .tables import DEFAULT_AMBIGUITY
+from .trilinear import interior_layer
 
 #: Methods that run block-wise, and how many edge directions number their ids.
 BLOCK_METHODS = {"cubes": 3, "tetra": 7, "squares": 3}
@@ -326,8 +327,12 @@ def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) 
     verts, ids, cells = _block_kernel(job).extract(
         zyx, rows, (0, 0, job.k0), allocate or kernel_outputs
     )
-    per_layer = BLOCK_METHODS[job.method] * job.grid_shape[0] * job.grid_shape[1]
-    layer = ids // per_layer  # non-decreasing: vertices come row by row
+    if job.ambiguity == TRILINEAR and job.method == "cubes":
+        # vertices inside cubes have ids past the edge ids, numbered by cube
+        layer = interior_layer(ids, job.grid_shape)
+    else:
+        layer = ids // (BLOCK_METHODS[job.method] * job.grid_shape[0] * job.grid_shape[1])
+    # layer is non-decreasing: vertices come row by row
     owned = len(ids) if job.last else int(np.searchsorted(layer, job.k1))
     owned_cells = len(cells)
     if job.method == "squares" and job.axis == "z" and not job.last and len(cells):
@@ -889,7 +894,9 @@ def extract_blocks(
         break
     check_level(level, ValueRange(stats.min, stats.max, 0), volume.source)
     _, note = resolve_vertex_offset(dtype, level, vertex_offset, stats.equal)
-    info = mesh_info(volume, method, level, flip, stats.offset)
+    info = mesh_info(
+        volume, method, level, flip, stats.offset, None if method == "tetra" else ambiguity
+    )
     info["blocks"] = len(ranges)
     mesh = out.mesh(info)
     if method == "squares" and mesh.n_cells == 0:

@@ -14,10 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..mesh import Mesh
+from ..methods import TRILINEAR
 from ..volume import Volume
 from .placement import Allocate, Block, kernel_outputs, mesh_info
 from .prepare import prepare
 from .tables import DEFAULT_AMBIGUITY, marching_cubes_table
+from .trilinear import inner_base, native_trilinear_table
 
 
 def marching_cubes(
@@ -42,7 +44,10 @@ def marching_cubes(
         Reverse the orientation (normals then point from negative to positive).
     ambiguity : str
         Rule for ambiguous faces: "separate-positive" (default, as VTK)
-        or "separate-negative"; see :mod:`isoconvert.extract.tables`.
+        or "separate-negative" (see :mod:`isoconvert.extract.tables`), or
+        "trilinear": in each cube the surface is homeomorphic to the level set
+        of the trilinear interpolant (see :mod:`isoconvert.extract.trilinear`;
+        it may add vertices inside cubes).
     nan_as : float or None
         Treat NaN/Inf samples as this value; None makes them an error.
     vertex_offset : float or None
@@ -56,7 +61,8 @@ def marching_cubes(
     -------
     Mesh
         ``vertices (V, 3) float64`` in world units, ``cells (C, 3) int64``,
-        ``edge_ids (V,) int64`` (``3 * (i + X * (j + Y * k)) + axis``). Normals
+        ``edge_ids (V,) int64`` (``3 * (i + X * (j + Y * k)) + axis``; a
+        vertex inside a cube: :func:`~isoconvert.extract.trilinear.inner_base`). Normals
         point from the positive to the negative side, i.e. out of bright
         objects. Vertices come row of samples by row (``j + Y * k``), within a
         row x-edges, then y-edges, then z-edges, each by increasing x; triangles
@@ -68,7 +74,9 @@ def marching_cubes(
     )
     block = CubesBlock.whole(volume, prep.offset, flip, prep.threads, ambiguity=ambiguity)
     verts, edge_ids, tris = block.extract(prep.array, prep.scan)
-    return Mesh(verts, tris, edge_ids, mesh_info(volume, "cubes", prep.level, flip, prep.offset))
+    return Mesh(
+        verts, tris, edge_ids, mesh_info(volume, "cubes", prep.level, flip, prep.offset, ambiguity)
+    )
 
 
 @dataclass(frozen=True)
@@ -112,8 +120,11 @@ class CubesBlock(Block):
         """
         from .. import _native
 
-        counts, table = marching_cubes_table(self.ambiguity)
-        n = _native.count_cubes(samples, scan, counts, table, self.threads)
+        trilinear = self.ambiguity == TRILINEAR
+        # the fixed rule's table decides every cube the trilinear tests leave alone
+        counts, table = marching_cubes_table(DEFAULT_AMBIGUITY if trilinear else self.ambiguity)
+        special = native_trilinear_table() if trilinear else None
+        n = _native.count_cubes(samples, scan, counts, table, special, self.threads)
         verts, edge_ids, tris = allocate(n.vertices, n.triangles, 3)
         _native.fill_cubes(
             samples,
@@ -121,6 +132,8 @@ class CubesBlock(Block):
             n,
             counts,
             table,
+            special,
+            inner_base(self.grid_shape),
             *self.placement(index_origin),
             self.threads,
             verts,

@@ -21,9 +21,15 @@ def reversed_orientation(volume: Volume, flip: bool) -> bool:
 
 
 def mesh_info(
-    volume: Volume, method: str, level: float, flip: bool, vertex_offset: float | None = None
+    volume: Volume,
+    method: str,
+    level: float,
+    flip: bool,
+    vertex_offset: float | None = None,
+    ambiguity: str | None = None,
 ) -> dict:
-    """The ``info`` of an extracted mesh: how it was made, and from which grid."""
+    """The ``info`` of an extracted mesh: how it was made (``ambiguity``: the
+    rule for ambiguous faces, for methods that have them), and from which grid."""
     info = {
         "method": method,
         "level": level,
@@ -32,6 +38,8 @@ def mesh_info(
         # the grid, so checks can tell the grid's boundary from holes
         "grid": grid_from_volume(volume),
     }
+    if ambiguity is not None:
+        info["ambiguity"] = ambiguity
     if vertex_offset is not None:
         info["vertex_offset"] = vertex_offset
     # where the coordinates are, for file headers (readers that know say so)

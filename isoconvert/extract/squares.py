@@ -113,7 +113,12 @@ def marching_squares(
     verts, edge_ids, segs = block.extract(prep.volume3, prep.scan)
     if len(segs) == 0:
         raise IsoconvertError(f"{volume.source}: no slice crosses level {prep.level:g}")
-    return Mesh(verts, segs, edge_ids, mesh_info(volume, "squares", prep.level, flip, prep.offset))
+    return Mesh(
+        verts,
+        segs,
+        edge_ids,
+        mesh_info(volume, "squares", prep.level, flip, prep.offset, ambiguity),
+    )
 
 
 @dataclass(frozen=True)

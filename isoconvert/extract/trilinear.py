@@ -52,10 +52,10 @@ cube: the positive set is ``g >= 0``, closed; the negative set ``g < 0``.
    vertices. Interior vertices sit at the mean of edge vertices the table
    names.
 
-Status (issue 22, in progress): the derivation, the stored entries
-(``trilinear_tables.py``, equal to the derivation), their flattening for the
-kernel (:func:`kernel_table`) and the Python reference (:func:`trilinear_cube`)
-are done; the C++ kernel, the CLI choice and the grid-level tests are not.
+Where it runs: the kernel (src/trilinear.hpp, called by src/cubes.cpp)
+repeats these tests on each special cube's values, with the tables
+:func:`kernel_table` flattens; :func:`trilinear_cube` is the reference it is
+tested against cube by cube (tests/test_trilinear_extract.py).
 
 Ties
 ----
@@ -434,6 +434,40 @@ def kernel_table() -> dict[str, np.ndarray]:
     for a in table.values():
         a.setflags(write=False)
     return table
+
+
+def inner_base(grid_shape: tuple[int, int, int]) -> int:
+    """First id of the vertices inside cubes, past every edge id of a grid of
+    ``grid_shape`` (X, Y, Z): the vertex in slot s of the cube with lowest
+    corner (i, j, k) has id ``inner_base + 16 * (i + X * (j + Y * k)) + s``."""
+    x, y, z = (int(n) for n in grid_shape)
+    return 3 * x * y * z
+
+
+def interior_layer(ids: np.ndarray, grid_shape: tuple[int, int, int]) -> np.ndarray:
+    """(V,) int64: the grid layer k of each vertex id, edge or interior
+    (:func:`inner_base`)."""
+    x, y = int(grid_shape[0]), int(grid_shape[1])
+    base = inner_base(grid_shape)
+    return np.where(ids < base, ids // (3 * x * y), (ids - base) // (16 * x * y))
+
+
+@cache
+def native_trilinear_table():
+    """:func:`kernel_table` as the kernel's ``_native.TrilinearTable``, built once."""
+    from .. import _native
+
+    k = kernel_table()
+
+    def int32(a) -> np.ndarray:
+        return np.ascontiguousarray(a, dtype=np.int32)
+
+    return _native.TrilinearTable.from_arrays(
+        *(int32(k[name]) for name in ("special", "entry", "loops", "corners", "disk", "tube")),
+        *(int32(k[name]) for name in ("piece_tris", "piece_inner", "tris", "inner")),
+        int32(CUBE_EDGES),
+        int32(FACE_CORNERS),
+    )
 
 
 # --- the tests, in Python: the reference the C++ kernel is checked against ----------

@@ -63,14 +63,30 @@ def _first_grid(comments: list[str]) -> dict | None:
 _OUR_COMMENTS = ("made by isoconvert", GRID_PREFIX.strip())
 
 
+def _extraction(lines: list[str]) -> dict:
+    """``method`` and ``ambiguity`` from isoconvert's provenance lines (``method M
+    level L``, ``ambiguity R``; escaped as the writers escape them), where present."""
+    out: dict = {}
+    for text in lines:
+        words = text.split() if isinstance(text, str) else []
+        if len(words) == 4 and words[0] == "method" and words[2] == "level":
+            out.setdefault("method", unescape_comment(words[1]))
+        elif len(words) == 2 and words[0] == "ambiguity":
+            out.setdefault("ambiguity", unescape_comment(words[1]))
+    return out
+
+
 def _recorded(comments: list[str]) -> dict:
     """What isoconvert's header comments record for the report: ``grid`` (the grid
-    record), ``unit`` (the volume's length unit, from a ``unit U`` line) and
+    record), ``unit`` (the volume's length unit, from a ``unit U`` line),
     ``cut_by_grid`` (True when isoconvert wrote the file, see
-    :func:`isoconvert.check_mesh`)."""
+    :func:`isoconvert.check_mesh`), and from such a file ``method`` and
+    ``ambiguity`` (the extraction rule, from ``method M level L`` and
+    ``ambiguity R`` lines)."""
     out: dict = {}
     if any(t.startswith(_OUR_COMMENTS) for t in comments):
         out["cut_by_grid"] = True
+        out.update(_extraction(comments))
     grid = _first_grid(comments)
     if grid is not None:
         out["grid"] = grid

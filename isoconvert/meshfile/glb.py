@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import FormatError, one_line
 from ..mesh import Mesh
-from .common import _check_indices, _Unreadable
+from .common import _check_indices, _extraction, _Unreadable
 
 _GLTF_COMPONENTS = {5120: "i1", 5121: "u1", 5122: "i2", 5123: "u2", 5125: "u4", 5126: "f4"}
 _GLTF_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
@@ -112,6 +112,8 @@ def _read_glb(path: Path) -> Mesh:
         from ..geometry import normalized_grid
 
         info["cut_by_grid"] = True  # isoconvert's file: extracted from a volume
+        lines = ours.get("provenance")
+        info.update(_extraction(lines if isinstance(lines, list) else []))
         grid = normalized_grid(ours.get("grid"))
         if grid is not None:
             info["grid"] = grid

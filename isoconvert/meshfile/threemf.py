@@ -10,7 +10,7 @@ from ..errors import FormatError
 from ..mesh import Mesh
 from ..units import unit_symbol
 from ..writers.header import parse_grid_comment
-from .common import _as_stored, _check_indices, _tag, _Unreadable
+from .common import _as_stored, _check_indices, _extraction, _tag, _Unreadable
 
 _3MF_MODEL = "3D/3dmodel.model"
 #: A part may inflate to at most this many times its compressed size (a 3MF
@@ -129,6 +129,8 @@ def _read_3mf(path: Path) -> Mesh:
             info["grid"] = grid
         if meta.get("name", "").startswith("isoconvert:"):
             info["cut_by_grid"] = True  # isoconvert's file: extracted from a volume
+        if meta.get("name", "") == "Description":
+            info.update(_extraction(text.splitlines()))
         if meta.get("name", "") == "isoconvert:coordinates" and "not converted" in text:
             unit_known = False  # isoconvert wrote "millimeter" for want of a unit
     # 3MF's unit (millimeter when the model names none), by its usual symbol

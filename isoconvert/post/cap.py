@@ -6,7 +6,8 @@ the level would close it, with a copy of the volume and with the cap one cell
 outside the grid. Instead, the cap is built on the grid's faces themselves:
 on each face, the region where samples are positive (>= level) is bounded by
 the very segments along which the surface meets that face (Marching Squares on
-the face image, with the cubes' rule for ambiguous faces). Each face cell's
+the face image, with the cubes' rule for ambiguous faces: under ``trilinear``
+the asymptotic decider of each ambiguous cell, the test the cubes made). Each face cell's
 positive part is a convex polygon (a triangle, quadrilateral, pentagon or the
 hexagon of an ambiguous face whose positive corners connect), whose corners are
 positive samples of the face and vertices of the surface on the cell's edges.
@@ -24,6 +25,7 @@ from ..errors import IsoconvertError
 from ..extract.placement import reversed_orientation
 from ..extract.tables import DEFAULT_AMBIGUITY
 from ..mesh import Mesh
+from ..methods import TRILINEAR
 from ..volume import Volume, slabs
 
 # Corners of a face cell in cyclic order in its (p, q) plane, and the four cell
@@ -151,7 +153,12 @@ def close_at_grid(
     shape = np.asarray(volume.shape, dtype=np.int64)
     stride = np.array([1, shape[0], shape[0] * shape[1]], dtype=np.int64)
     outward_flip = reversed_orientation(volume, flip)
-    tables = [np.array(_cell_triangles(case, ambiguity), dtype=np.int64) for case in range(16)]
+    decided = ambiguity == TRILINEAR  # each ambiguous cell by its own decider
+    fixed = DEFAULT_AMBIGUITY if decided else ambiguity
+    tables = [np.array(_cell_triangles(case, fixed), dtype=np.int64) for case in range(16)]
+    joined = [
+        np.array(_cell_triangles(case, "separate-negative"), dtype=np.int64) for case in (5, 10)
+    ]
     keys = []  # (T, 3) int64: edge ids (>= 0) or -1 - sample index (< 0)
     for axis, side, image in _face_images(volume):
         p_axis, q_axis = [a for a in range(3) if a != axis]
@@ -166,12 +173,20 @@ def close_at_grid(
         # the cap's normals point out of the grid: -axis on side 0, +axis on the far side
         p_cross_q = 1 if (p_axis, q_axis) in ((1, 2), (0, 1)) else -1
         reverse = (p_cross_q * (1 if side else -1) < 0) != outward_flip
+        groups = []
         for c in range(1, 16):
-            table = tables[c]
-            if not len(table):
-                continue
             p, q = np.nonzero(case == c)
-            if not len(p):
+            if decided and c in (5, 10) and len(p):
+                # corners (00, 10, 01, 11) in (p, q), as the cubes read a face
+                f00, f10 = values[p, q], values[p + 1, q]
+                f01, f11 = values[p, q + 1], values[p + 1, q + 1]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    joins = (f00 * f11 - f10 * f01) / (f00 + f11 - f10 - f01) >= level
+                groups.append((joined[c == 10], p[joins], q[joins]))
+                p, q = p[~joins], q[~joins]
+            groups.append((tables[c], p, q))
+        for table, p, q in groups:
+            if not len(table) or not len(p):
                 continue
             base = side * stride[axis] + p * stride[p_axis] + q * stride[q_axis]
             slot_keys = np.empty((len(p), 8), dtype=np.int64)

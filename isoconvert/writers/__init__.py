@@ -61,6 +61,9 @@ class Writer:
     #: which the mesh readers take as the record that a grid cut the mesh; meshio's
     #: formats have no place isoconvert can write that in
     records_source: bool = True
+    #: whether its reader gives back the extraction rule (``mesh.info["ambiguity"]``,
+    #: an ``ambiguity R`` header comment) for the report
+    records_extraction: bool = False
 
 
 WRITERS: Registry[Writer] = Registry("output format")
@@ -80,6 +83,7 @@ for _writer in (
         _BOTH,
         precision="adaptive",
         records_grid=True,
+        records_extraction=True,
         streams=True,
         attributes=_ALL_ATTRIBUTES,
     ),
@@ -92,6 +96,7 @@ for _writer in (
         _BOTH,
         precision="float64",
         records_grid=True,
+        records_extraction=True,
         streams=True,
         attributes=frozenset({"normals"}),
     ),
@@ -115,6 +120,7 @@ for _writer in (
         _TRIANGLES,
         precision="float64",
         records_grid=True,
+        records_extraction=True,
         streams=True,
     ),
     Writer(
@@ -127,6 +133,7 @@ for _writer in (
         _BOTH,
         precision="adaptive",
         records_grid=True,
+        records_extraction=True,
         streams=True,
         attributes=_ALL_ATTRIBUTES,
     ),
@@ -140,6 +147,7 @@ for _writer in (
         _TRIANGLES,
         precision="float32",
         records_grid=True,
+        records_extraction=True,
         streams=True,
         attributes=_NORMALS_VALUES,
     ),
@@ -153,6 +161,7 @@ for _writer in (
         _TRIANGLES,
         precision="float32",
         records_grid=True,
+        records_extraction=True,
         streams=True,
     ),
     Writer(

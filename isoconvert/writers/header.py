@@ -109,8 +109,8 @@ def provenance(mesh: Mesh) -> list[str]:
     -------
     list of str
         ``made by isoconvert VERSION``, then ``source PATH``, ``method M
-        level L``, ``frame LPS`` (or RAS), ``unit U``, ``normals FROM`` and
-        ``values FROM`` when ``mesh.info`` has them.
+        level L``, ``ambiguity R``, ``frame LPS`` (or RAS), ``unit U``,
+        ``normals FROM`` and ``values FROM`` when ``mesh.info`` has them.
     """
     info = mesh.info
     if not info:
@@ -124,6 +124,8 @@ def provenance(mesh: Mesh) -> list[str]:
         level = info.get("level", "?")
         level = f"{level:.17g}" if isinstance(level, numbers.Real) else str(level)
         lines.append(f"method {info['method']} level {level}")
+    if "ambiguity" in info:
+        lines.append(f"ambiguity {info['ambiguity']}")
     if "frame" in info:
         lines.append(f"frame {info['frame']}")
     if "unit" in info:

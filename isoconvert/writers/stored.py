@@ -100,6 +100,8 @@ def _stored(
     # meshio's formats cannot: a report on them is a report on a file without it
     if writer.records_source:
         info["cut_by_grid"] = True
+    if not writer.records_extraction:  # its reader cannot give the rule back
+        info.pop("ambiguity", None)
     if writer.records_grid:
         grid = normalized_grid(mesh.info.get("grid"))
         if grid is not None:

@@ -1,0 +1,293 @@
+"""``--ambiguity trilinear`` (issue 22): the kernel against the Python
+reference, and the surface against an independent fine resampling of the
+trilinear interpolant (components, Euler characteristic, boundary loops)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from conftest import dataset, read_real_scan
+from scipy.interpolate import RegularGridInterpolator
+from skimage import measure
+
+from isoconvert import Volume, check_mesh, extract
+from isoconvert.extract import trilinear as tl
+from isoconvert.extract.blocks import Blocks
+from isoconvert.extract.tables import CUBE_EDGES, CUBE_VERTICES, marching_cubes_table
+
+
+def topology(vertices: np.ndarray, triangles: np.ndarray) -> tuple[int, int, int]:
+    """(components, Euler characteristic, boundary loops), counted by trimesh."""
+    if not len(triangles):
+        return (0, 0, 0)
+    mesh = trimesh.Trimesh(vertices, triangles, process=False)
+    components = len(trimesh.graph.connected_components(mesh.edges, nodes=np.unique(triangles)))
+    return components, int(mesh.euler_number), len(mesh.outline().entities)
+
+
+def resampled(xyz: np.ndarray, level: float, n: int) -> tuple[int, int, int]:
+    """Topology of the level set of the grid's trilinear interpolant, sampled
+    ``n`` times per cell edge and contoured by scikit-image."""
+    axes = [np.arange(s, dtype=float) for s in xyz.shape]
+    fine = [np.linspace(0, s - 1, (s - 1) * n + 1) for s in xyz.shape]
+    points = np.stack(np.meshgrid(*fine, indexing="ij"), axis=-1)
+    field = RegularGridInterpolator(axes, xyz)(points.reshape(-1, 3)).reshape(points.shape[:3])
+    if field.min() >= level or field.max() < level:
+        return (0, 0, 0)
+    verts, faces, _, _ = measure.marching_cubes(field, level, method="lorensen")
+    return topology(verts, faces)
+
+
+def ours(xyz: np.ndarray, level: float, ambiguity: str = "trilinear") -> tuple[int, int, int]:
+    mesh = extract(Volume(xyz), level, ambiguity=ambiguity)
+    return topology(mesh.vertices, mesh.cells)
+
+
+# --- the kernel is the reference -----------------------------------------------------------
+
+
+def _reference_triangles(zyx: np.ndarray, level: float) -> tuple[list, dict]:
+    """Triangles as id triples, cube by cube in the kernel's order, from
+    :func:`trilinear.trilinear_cube` (special cubes) and the default table."""
+    nz, ny, nx = zyx.shape
+    base = tl.inner_base((nx, ny, nz))
+    counts, table = marching_cubes_table("separate-positive")
+    low = CUBE_VERTICES[CUBE_EDGES[:, 0]]
+    axis = np.argmax(CUBE_VERTICES[CUBE_EDGES[:, 1]] - low, axis=1)
+    out, inner = [], {}
+    for k in range(nz - 1):
+        for j in range(ny - 1):
+            for i in range(nx - 1):
+                values = np.array(
+                    [zyx[k + (v >> 2), j + (v >> 1 & 1), i + (v & 1)] for v in range(8)]
+                )
+                values = values.astype(np.float64)
+                config = sum(1 << v for v in range(8) if values[v] >= level)
+                ids = [
+                    3 * ((i + low[e, 0]) + nx * ((j + low[e, 1]) + ny * (k + low[e, 2]))) + axis[e]
+                    for e in range(12)
+                ]
+                if not tl.needs_interior_test(config):
+                    out += [tuple(ids[e] for e in t) for t in table[config, : counts[config]]]
+                    continue
+                cube = base + 16 * (i + nx * (j + ny * k))
+                slot = 0
+                for tris, masks in tl.trilinear_cube(values, level):
+                    first = cube + slot
+                    for mask in masks:
+                        inner[cube + slot] = [ids[e] for e in range(12) if mask >> e & 1]
+                        slot += 1
+                    out += [tuple(ids[e] if e < 12 else first + e - 12 for e in t) for t in tris]
+    return out, inner
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_kernel_gives_the_reference_pieces_cube_by_cube(seed):
+    """Random grids (a third with values exactly at the level): the kernel's
+    triangles, by vertex id, are the reference's; an interior vertex sits at
+    the mean of the edge vertices its mask names."""
+    rng = np.random.default_rng(seed)
+    for trial in range(40):
+        zyx = rng.uniform(-1, 1, size=tuple(rng.integers(2, 6, size=3)))
+        if trial % 3 == 0:
+            zyx = np.round(zyx * 2) / 2
+        mesh = extract(Volume.from_zyx(zyx), 0.0, ambiguity="trilinear", vertex_offset=0.0)
+        ids = mesh.edge_ids
+        expected, inner = _reference_triangles(zyx, 0.0)
+        assert [tuple(t) for t in ids[mesh.cells].tolist()] == expected
+        where = {int(d): n for n, d in enumerate(ids)}
+        for vertex, edges in inner.items():
+            mean = np.mean([mesh.vertices[where[e]] for e in edges], axis=0)
+            np.testing.assert_allclose(mesh.vertices[where[vertex]], mean, atol=1e-12)
+
+
+# --- the surface is the interpolant's ------------------------------------------------------
+
+
+def _cube_values(config: int, rng: np.random.Generator) -> np.ndarray:
+    """(2, 2, 2) x-y-z values with the signs of ``config`` and random sizes,
+    so the face and body saddles fall on either side of the level."""
+    size = rng.uniform(0.05, 1.0, size=8)
+    values = np.where([(config >> v) & 1 for v in range(8)], size, -size)
+    xyz = np.empty((2, 2, 2))
+    for v in range(8):
+        xyz[v & 1, v >> 1 & 1, v >> 2] = values[v]
+    return xyz
+
+
+def _near_face_saddle(xyz: np.ndarray, level: float, margin: float) -> bool:
+    """Whether an ambiguous face's saddle lies within ``margin`` of the level:
+    a resampling then sees the face's contour only at a resolution near
+    1 / margin (a face saddle 9e-5 off the level fooled 24 and 48 samples)."""
+    values = np.array([xyz[v & 1, v >> 1 & 1, v >> 2] for v in range(8)])
+    config = sum(1 << v for v in range(8) if values[v] >= level)
+    for f, (c00, c10, c01, c11) in enumerate(tl.FACE_CORNERS):
+        if tl.ambiguous_faces(config) >> f & 1:
+            f00, f10, f01, f11 = values[[c00, c10, c01, c11]]
+            if abs((f00 * f11 - f10 * f01) / (f00 + f11 - f10 - f01) - level) < margin:
+                return True
+    return False
+
+
+def test_every_configuration_has_the_topology_of_the_interpolant():
+    """All 256 sign configurations (the special ones with several draws that
+    sweep the deciders): components, Euler characteristic and boundary loops
+    equal those of the resampled interpolant; cubes whose saddle is too near
+    the level to resolve (a face saddle within 0.01, or two resolutions that
+    disagree) are left out, and must be few."""
+    rng = np.random.default_rng(22)
+    compared = unresolved = 0
+    fixed_rule_wrong = 0
+    for config in range(1, 255):
+        for _ in range(5 if tl.needs_interior_test(config) else 1):
+            xyz = _cube_values(config, rng)
+            if _near_face_saddle(xyz, 0.0, 0.01):
+                unresolved += 1
+                continue
+            coarse, fine = resampled(xyz, 0.0, 20), resampled(xyz, 0.0, 40)
+            if coarse != fine:
+                unresolved += 1
+                continue
+            compared += 1
+            assert ours(xyz, 0.0) == fine, (config, xyz.ravel().tolist())
+            fixed_rule_wrong += ours(xyz, 0.0, "separate-positive") != fine
+    assert compared > 700 and unresolved < compared / 4
+    assert fixed_rule_wrong > 100  # the comparison can tell the rules apart
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_random_grids_have_the_topology_of_the_interpolant(seed):
+    """Random 3-5^3 grids: the whole surface's topology is the interpolant's,
+    and the mesh is closed, manifold and oriented away from the grid's sides."""
+    rng = np.random.default_rng(100 + seed)
+    compared = differ_default = 0
+    for _ in range(60):
+        xyz = rng.uniform(-1, 1, size=tuple(rng.integers(3, 6, size=3)))
+        cubes = [
+            xyz[i : i + 2, j : j + 2, k : k + 2]
+            for i, j, k in np.ndindex(*(n - 1 for n in xyz.shape))
+        ]
+        near = any(_near_face_saddle(c, 0.0, 0.003) for c in cubes)
+        if near or resampled(xyz, 0.0, 12) != (fine := resampled(xyz, 0.0, 24)):
+            continue
+        compared += 1
+        mesh = extract(Volume(xyz), 0.0, ambiguity="trilinear")
+        assert topology(mesh.vertices, mesh.cells) == fine
+        checks = check_mesh(mesh).checks
+        assert checks["manifold"] and checks["oriented"] and checks["no-holes"], checks
+        differ_default += ours(xyz, 0.0, "separate-positive") != fine
+    assert compared >= 30 and differ_default >= compared // 2
+
+
+@pytest.mark.parametrize(
+    "name, xyz_corners, expected",
+    [
+        # two positive corners on a face diagonal, others -a: the face saddle
+        # (1 - a^2) / (2 + 2a) is >= 0 exactly when a <= 1 (one disk), else two
+        ("face diagonal joined (a = 0.5)", {0: 1, 3: 1, "rest": -0.5}, (1, 1, 1)),
+        ("face diagonal apart (a = 2)", {0: 1, 3: 1, "rest": -2.0}, (2, 2, 2)),
+        # opposite corners 0 and 7, others -a: the centre is (2 - 6a) / 8, so a
+        # tunnel (an annulus, Euler characteristic 0) joins them when a < 1/3
+        ("body diagonal tunnel (a = 0.2)", {0: 1, 7: 1, "rest": -0.2}, (1, 0, 2)),
+        ("body diagonal apart (a = 0.5)", {0: 1, 7: 1, "rest": -0.5}, (2, 2, 2)),
+    ],
+)
+def test_worked_cases(name, xyz_corners, expected):
+    """Cases whose answer follows by hand from the interpolant (see each)."""
+    xyz = np.empty((2, 2, 2))
+    for v in range(8):
+        xyz[v & 1, v >> 1 & 1, v >> 2] = xyz_corners.get(v, xyz_corners["rest"])
+    assert ours(xyz, 0.0) == expected
+    assert resampled(xyz, 0.0, 40) == expected
+
+
+def test_slices_by_the_asymptotic_decider_cut_every_grid_face_alike():
+    """The cubes' contour on each z-layer (their triangles' edges that lie in
+    it) is the squares' ``asymptotic`` contour of that slice, by edge id."""
+    rng = np.random.default_rng(7)
+    xyz = rng.uniform(-1, 1, size=(9, 8, 6))
+    cubes = extract(Volume(xyz), 0.0, ambiguity="trilinear")
+    squares = extract(Volume(xyz), 0.0, method="squares", axis="z", ambiguity="asymptotic")
+    nx, ny = xyz.shape[:2]
+
+    def in_layers(ids_pairs: np.ndarray) -> set:
+        a, b = np.sort(ids_pairs, axis=1).T
+        edge_vertex = (a < tl.inner_base(xyz.shape)) & (b < tl.inner_base(xyz.shape))
+        flat = edge_vertex & (a % 3 != 2) & (b % 3 != 2)
+        same = flat & (a // (3 * nx * ny) == b // (3 * nx * ny))
+        return set(zip(a[same].tolist(), b[same].tolist(), strict=True))
+
+    tri = cubes.edge_ids[cubes.cells]
+    edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    contour = in_layers(squares.edge_ids[squares.cells])
+    assert contour and in_layers(edges) == contour
+    default = extract(Volume(xyz), 0.0)
+    t = default.edge_ids[default.cells]
+    assert in_layers(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])) != contour
+
+
+def test_block_wise_is_byte_identical_and_close_caps_by_the_decider():
+    rng = np.random.default_rng(3)
+    volume = Volume(rng.uniform(-1, 1, size=(11, 9, 17)), spacing=(1, 0.5, 2), origin=(1, 2, 3))
+    whole = extract(volume, 0.1, ambiguity="trilinear")
+    assert (whole.edge_ids >= tl.inner_base(volume.shape)).any()
+    for size in (1, 2, 5):
+        part = extract(volume, 0.1, ambiguity="trilinear", blocks=Blocks(size=size))
+        for a, b in ((part.vertices, whole.vertices), (part.cells, whole.cells)):
+            assert a.tobytes() == b.tobytes()
+        assert part.info["ambiguity"] == "trilinear"
+    from isoconvert.post.cap import close_at_grid
+
+    closed = close_at_grid(whole, volume, 0.1, ambiguity="trilinear")
+    checks = check_mesh(closed).checks
+    assert checks["watertight"] and checks["manifold"] and checks["oriented"]
+    # the fixed rule's cap does not fit where a boundary face is decided the other way
+    wrong = close_at_grid(whole, volume, 0.1, ambiguity="separate-positive")
+    assert not check_mesh(wrong).checks["watertight"]
+
+
+def test_check_reports_the_rule_the_file_records(tmp_path):
+    from isoconvert import write_mesh
+    from isoconvert.meshfile import read_mesh
+
+    xyz = np.random.default_rng(5).uniform(-1, 1, size=(5, 5, 5))
+    for rule, topology_text in (
+        ("trilinear", "trilinear interpolant"),
+        ("separate-positive", "fixed rule"),
+    ):
+        out = tmp_path / f"{rule}.ply"
+        write_mesh(extract(Volume(xyz), 0.0, ambiguity=rule), out)
+        report = check_mesh(read_mesh(out)).to_dict()
+        assert report["extraction"]["method"] == "cubes"
+        assert report["extraction"]["ambiguity"] == rule
+        assert report["extraction"]["topology"].startswith(topology_text)
+
+
+@pytest.mark.parametrize(
+    "name, level",
+    [
+        ("fuel_64x64x64_uint8.raw", 40.5),
+        ("engine_256x256x128_uint8.raw", 80.5),
+        ("embryo_256x256x256_uint8.raw", 60.5),  # 15 % of its cut cubes take the tests
+        ("FLAIR.nrrd", 89.5),
+    ],
+)
+def test_real_scans_keep_every_edge_vertex_and_stay_watertight(name, level):
+    """Every bipolar-edge vertex of default cubes is there, at the same place;
+    closed wherever default cubes is; block-wise byte-identical."""
+    dataset(name)
+    volume = read_real_scan(name)
+    default = extract(volume, level)
+    mesh = extract(volume, level, ambiguity="trilinear")
+    on_edges = mesh.edge_ids < tl.inner_base(volume.shape)
+    np.testing.assert_array_equal(mesh.edge_ids[on_edges], default.edge_ids)
+    assert mesh.vertices[on_edges].tobytes() == default.vertices.tobytes()
+    before, after = check_mesh(default).checks, check_mesh(mesh).checks
+    for check in ("watertight", "manifold", "oriented", "no-holes"):
+        assert after[check] or not before[check], check
+    if name.startswith("embryo"):
+        assert (~on_edges).sum() > 1000  # the scan does exercise the interior vertices
+    part = extract(volume, level, ambiguity="trilinear", blocks=Blocks(size=17))
+    assert part.vertices.tobytes() == mesh.vertices.tobytes()
+    assert part.cells.tobytes() == mesh.cells.tobytes()
