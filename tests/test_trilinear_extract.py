@@ -202,29 +202,35 @@ def test_worked_cases(name, xyz_corners, expected):
     assert resampled(xyz, 0.0, 40) == expected
 
 
-def test_slices_by_the_asymptotic_decider_cut_every_grid_face_alike():
-    """The cubes' contour on each z-layer (their triangles' edges that lie in
-    it) is the squares' ``asymptotic`` contour of that slice, by edge id."""
+@pytest.mark.parametrize("axis", ["x", "y", "z"])
+def test_slices_by_the_asymptotic_decider_cut_every_grid_face_alike(axis):
+    """The cubes' contour on each grid plane across ``axis`` (their triangles'
+    edges that lie in it) is the squares' ``asymptotic`` contour of that slice,
+    by edge id; default cubes' is not."""
+    a = "xyz".index(axis)
     rng = np.random.default_rng(7)
     xyz = rng.uniform(-1, 1, size=(9, 8, 6))
-    cubes = extract(Volume(xyz), 0.0, ambiguity="trilinear")
-    squares = extract(Volume(xyz), 0.0, method="squares", axis="z", ambiguity="asymptotic")
+    squares = extract(Volume(xyz), 0.0, method="squares", axis=axis, ambiguity="asymptotic")
     nx, ny = xyz.shape[:2]
+    edge_ids_end = tl.inner_base(xyz.shape)
 
-    def in_layers(ids_pairs: np.ndarray) -> set:
-        a, b = np.sort(ids_pairs, axis=1).T
-        edge_vertex = (a < tl.inner_base(xyz.shape)) & (b < tl.inner_base(xyz.shape))
-        flat = edge_vertex & (a % 3 != 2) & (b % 3 != 2)
-        same = flat & (a // (3 * nx * ny) == b // (3 * nx * ny))
-        return set(zip(a[same].tolist(), b[same].tolist(), strict=True))
+    def plane(ids: np.ndarray) -> np.ndarray:
+        cell = ids // 3
+        return np.stack([cell % nx, cell // nx % ny, cell // (nx * ny)])[a]
 
-    tri = cubes.edge_ids[cubes.cells]
-    edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    contour = in_layers(squares.edge_ids[squares.cells])
-    assert contour and in_layers(edges) == contour
-    default = extract(Volume(xyz), 0.0)
-    t = default.edge_ids[default.cells]
-    assert in_layers(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])) != contour
+    def in_planes(pairs: np.ndarray) -> set:
+        lo, hi = np.sort(pairs, axis=1).T
+        keep = (hi < edge_ids_end) & (lo % 3 != a) & (hi % 3 != a) & (plane(lo) == plane(hi))
+        return set(zip(lo[keep].tolist(), hi[keep].tolist(), strict=True))
+
+    def triangle_edges(mesh) -> np.ndarray:
+        t = mesh.edge_ids[mesh.cells]
+        return np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+
+    contour = in_planes(squares.edge_ids[squares.cells])
+    trilinear = extract(Volume(xyz), 0.0, ambiguity="trilinear")
+    assert contour and in_planes(triangle_edges(trilinear)) == contour
+    assert in_planes(triangle_edges(extract(Volume(xyz), 0.0))) != contour
 
 
 def test_block_wise_is_byte_identical_and_close_caps_by_the_decider():
@@ -289,5 +295,23 @@ def test_real_scans_keep_every_edge_vertex_and_stay_watertight(name, level):
     if name.startswith("embryo"):
         assert (~on_edges).sum() > 1000  # the scan does exercise the interior vertices
     part = extract(volume, level, ambiguity="trilinear", blocks=Blocks(size=17))
+    assert part.vertices.tobytes() == mesh.vertices.tobytes()
+    assert part.cells.tobytes() == mesh.cells.tobytes()
+
+
+def test_samples_at_the_level_take_the_default_offset_as_every_rule_does():
+    """Integer samples equal to the level: the automatic vertex offset applies
+    (no zero-length edge, no degenerate triangle), and the faces are decided on
+    the samples as they are, so block-wise equals in-memory here too."""
+    from isoconvert.methods import NO_DEGENERATE_OFFSET
+
+    data = np.random.default_rng(9).integers(0, 5, size=(7, 6, 8)).astype(np.uint8)
+    volume = Volume(data)
+    mesh = extract(volume, 2, ambiguity="trilinear")
+    assert mesh.info["vertex_offset"] == NO_DEGENERATE_OFFSET
+    assert (mesh.edge_ids >= tl.inner_base(volume.shape)).any()
+    checks = check_mesh(mesh).checks
+    assert checks["no-zero-length"] and checks["no-degenerate"] and checks["manifold"]
+    part = extract(volume, 2, ambiguity="trilinear", blocks=Blocks(size=2))
     assert part.vertices.tobytes() == mesh.vertices.tobytes()
     assert part.cells.tobytes() == mesh.cells.tobytes()
