@@ -279,6 +279,21 @@ def test_every_real_scan_on_the_cluster_is_the_in_memory_mesh(address, name):
     )
 
 
+def test_trilinear_on_the_cluster_is_the_in_memory_mesh_of_a_real_scan(address):
+    """The Marschner-Lobb signal, whose cubes need interior vertices at this level."""
+    from isoconvert.extract.trilinear import inner_base
+
+    dataset("marschner_lobb_41x41x41_uint8.raw")
+    volume = read_real_scan("marschner_lobb_41x41x41_uint8.raw")
+    reference = extract(volume, 128.5, ambiguity="trilinear")
+    assert (reference.edge_ids >= inner_base(volume.shape)).sum() > 100
+    for size in (4, 9):
+        mesh = extract(
+            volume, 128.5, ambiguity="trilinear", blocks=Blocks(size=size, scheduler=address)
+        )
+        _same(mesh, reference)
+
+
 def test_workers_read_their_own_slabs_of_a_real_scan(address, monkeypatch):
     path = dataset("tooth_103x94x161_uint8.raw")
     monkeypatch.chdir(path.parent)  # a relative path here; the workers' folder is another

@@ -277,6 +277,7 @@ def test_check_reports_the_rule_the_file_records(tmp_path):
         ("engine_256x256x128_uint8.raw", 80.5),
         ("embryo_256x256x256_uint8.raw", 60.5),  # 15 % of its cut cubes take the tests
         ("FLAIR.nrrd", 89.5),
+        ("marschner_lobb_41x41x41_uint8.raw", 128.5),  # the classic test signal
     ],
 )
 def test_real_scans_keep_every_edge_vertex_and_stay_watertight(name, level):
