@@ -891,10 +891,10 @@ def format_report(report: Report) -> str:
     lines = [f"{report.source or 'mesh'}: {report.kind}"]
     made = report.extraction
     if made:
+        # post-processing (--keep-largest, --decimate, ...) may change the topology since
         lines.append(
-            f"  extracted by {made['method']}"
-            + (f", --ambiguity {made['ambiguity']}" if "ambiguity" in made else "")
-            + (f" (topology: {made['topology']})" if "topology" in made else "")
+            f"  extracted by {made['method']}, --ambiguity {made['ambiguity']}"
+            + (f" (topology as extracted: {made['topology']})" if "topology" in made else "")
         )
     if report.kind == "triangles":
         lines.append(
