@@ -316,3 +316,43 @@ def test_samples_at_the_level_take_the_default_offset_as_every_rule_does():
     part = extract(volume, 2, ambiguity="trilinear", blocks=Blocks(size=2))
     assert part.vertices.tobytes() == mesh.vertices.tobytes()
     assert part.cells.tobytes() == mesh.cells.tobytes()
+
+
+def _by_vertex(values: list[float]) -> np.ndarray:
+    xyz = np.empty((2, 2, 2))
+    for v in range(8):
+        xyz[v & 1, v >> 1 & 1, v >> 2] = values[v]
+    return xyz
+
+
+@pytest.mark.parametrize(
+    "name, values, faces",
+    [
+        # Chernyaev's tunnel subcases: the body saddle joins what the faces keep
+        # apart (or, in 7.4.2, what they join around): one tube through the cube.
+        # Values by cube vertex x + 2y + 4z; `faces`: which ambiguous faces join
+        # their positive corners (the asymptotic decider), as the case requires.
+        ("4.1.2: opposite corners", [1, -0.2, -0.2, -0.2, -0.2, -0.2, -0.2, 1], "none"),
+        (
+            "6.1.2: an edge and the far corner",
+            [0.98, 0.18, -0.36, -0.25, -0.3, -0.7, -0.12, 0.64],
+            "none",
+        ),
+        (
+            "7.4.2: three face-diagonal corners",
+            [-0.8, 0.79, 0.66, -0.47, 0.91, -0.72, -0.49, -0.9],
+            "all",
+        ),
+        ("10.1.2: two opposite edges", [1, -0.5, -0.5, 0.1, 0.1, -0.5, -0.5, 1], "none"),
+    ],
+)
+def test_tunnel_cases(name, values, faces):
+    """Each is a tube (one component, Euler characteristic 0, two boundary
+    loops), as the resampled interpolant says; default cubes make no tube."""
+    config = sum(1 << v for v in range(8) if values[v] >= 0)
+    decided = tl.face_decisions(np.array(values, dtype=float), 0.0, config)
+    assert tl.ambiguous_faces(config) or faces == "none"
+    assert decided == (tl.ambiguous_faces(config) if faces == "all" else 0)
+    xyz = _by_vertex(values)
+    assert ours(xyz, 0.0) == resampled(xyz, 0.0, 40) == resampled(xyz, 0.0, 80) == (1, 0, 2)
+    assert ours(xyz, 0.0, "separate-positive") != (1, 0, 2)
