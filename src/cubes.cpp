@@ -133,6 +133,13 @@ struct Walk {
     i64 lo, hi;
     if (!trim(s, r, lo, hi)) return;
     const T *const p[4] = {f + r[0] * s.nx, f + r[1] * s.nx, f + r[2] * s.nx, f + r[3] * s.nx};
+    if (trilinear && cubes) {
+      // special cubes read their values: the next slice's rows are long out of
+      // cache, so ask for their lines at once (as the filling pass does)
+      for (i64 i = lo; i <= hi; i += 64 / sizeof(T)) {
+        for (int b = 1; b < 4; ++b) __builtin_prefetch(p[b] + i);
+      }
+    }
     for (i64 w = lo >> 6; w <= hi >> 6; ++w) {
       const Word m(s, bits, w);
       cy += popcount(m.y[0]);

@@ -6,11 +6,10 @@
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/tuple.h>
 
-#include <vector>
-
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "cubes.hpp"
 #include "bind.hpp"
@@ -85,7 +84,8 @@ iso::TrilinearTable trilinear_table(const Int32s &special, const Int32s &entry,
   t.piece_inner = int32s(piece_inner, "piece_inner", t.piece_tris.size());
   t.tris = int32s(tris, "tris");
   t.inner = int32s(inner, "inner");
-  const std::vector<iso::i32> ed = int32s(edges, "edges", 24), fc = int32s(face_corners, "faces", 24);
+  const std::vector<iso::i32> ed = int32s(edges, "edges", 24);
+  const std::vector<iso::i32> fc = int32s(face_corners, "faces", 24);
   for (int e = 0; e < 12; ++e) {
     t.edges[e][0] = ed[2 * e];
     t.edges[e][1] = ed[2 * e + 1];
@@ -103,7 +103,9 @@ iso::TrilinearTable trilinear_table(const Int32s &special, const Int32s &entry,
   }
   const iso::i64 pieces = iso::i64(t.piece_tris.size()) - 1;
   // the kernel packs 4 piece numbers of 15 bits in a word
-  if (pieces < 0 || pieces >= (1 << 15) || t.piece_tris[0] != 0 || t.piece_inner[0] != 0) bad("piece starts");
+  if (pieces < 0 || pieces >= (1 << 15) || t.piece_tris[0] != 0 || t.piece_inner[0] != 0) {
+    bad("piece starts");
+  }
   for (iso::i64 p = 0; p < pieces; ++p) {
     const iso::i32 t0 = t.piece_tris[p], t1 = t.piece_tris[p + 1];
     const iso::i32 i0 = t.piece_inner[p], i1 = t.piece_inner[p + 1];
@@ -132,21 +134,17 @@ iso::TrilinearTable trilinear_table(const Int32s &special, const Int32s &entry,
       }
     }
   }
-  // every face decision a special configuration can take has its entry
+  // (entries are in range by now) what the kernel reads beside them; then every
+  // face decision a special configuration can take must have its entry
+  iso::fill_derived(t);
   for (int c = 0; c < 256; ++c) {
     if (!t.special[c]) continue;
-    int ambiguous = 0;
-    for (int f = 0; f < 6; ++f) {
-      const auto s = [&](int q) { return (c >> t.face_corners[f][q]) & 1; };
-      if (s(0) == s(3) && s(1) == s(2) && s(0) != s(1)) ambiguous |= 1 << f;
-    }
     for (int faces = 0; faces < 64; ++faces) {
-      if (faces & ~ambiguous) continue;
+      if (faces & ~int(t.ambiguous[c])) continue;
       const iso::i32 e = t.entry[64 * c + faces];
       if (e < 0 || e >= iso::i32(n)) bad("a reachable entry is missing");
     }
   }
-  iso::fill_boundary_labels(t);
   return t;
 }
 

@@ -27,10 +27,19 @@ struct TrilinearTable {
   std::vector<i32> inner;                    // (I,) edge mask of each interior vertex
   i32 edges[12][2];                          // tables.CUBE_EDGES
   i32 face_corners[6][4];                    // trilinear.FACE_CORNERS (00, 10, 01, 11)
-  // (E, 2, 8) per entry and sign, each corner's component on the cube's
-  // boundary (boundary_labels), filled by fill_boundary_labels
+  // derived by fill_derived: per configuration, the bit mask of its
+  // ambiguous faces; (E, 2, 8) per entry and sign, each corner's component on
+  // the cube's boundary (boundary_labels)
+  std::uint8_t ambiguous[256];
   std::vector<std::uint8_t> boundary;
 };
+
+// Whether face f's diagonal corners share signs in `config` (an ambiguous face).
+inline bool ambiguous_face(const TrilinearTable &t, unsigned config, int f) {
+  const i32 *c = t.face_corners[f];
+  auto sign = [&](int q) { return (config >> c[q]) & 1; };
+  return sign(0) == sign(3) && sign(1) == sign(2) && sign(0) != sign(1);
+}
 
 // Corners of sign s are joined in `label[s]` (a component's corners share a label).
 inline void join_corners(std::uint8_t (&label)[2][8], int s, int a, int b) {
@@ -51,11 +60,9 @@ inline void boundary_labels(const TrilinearTable &t, unsigned config, int faces,
   for (const auto &edge : t.edges) {
     if (sign(edge[0]) == sign(edge[1])) join_corners(label, sign(edge[0]), edge[0], edge[1]);
   }
-  for (int f = 0; f < 6; ++f) {
+  for (int m = t.ambiguous[config]; m; m &= m - 1) {
+    const int f = ctz(std::uint64_t(m));
     const i32 *c = t.face_corners[f];
-    if (!(sign(c[0]) == sign(c[3]) && sign(c[1]) == sign(c[2]) && sign(c[0]) != sign(c[1]))) {
-      continue;
-    }
     const int s = (faces >> f) & 1;  // the sign whose corners the face joins
     if (sign(c[0]) == s) {
       join_corners(label, s, c[0], c[3]);
@@ -65,8 +72,12 @@ inline void boundary_labels(const TrilinearTable &t, unsigned config, int faces,
   }
 }
 
-// Fill t.boundary from t.entry (every entry's configuration and faces).
-inline void fill_boundary_labels(TrilinearTable &t) {
+// Fill t.ambiguous, then t.boundary from t.entry (every entry's configuration and faces).
+inline void fill_derived(TrilinearTable &t) {
+  for (int c = 0; c < 256; ++c) {
+    t.ambiguous[c] = 0;
+    for (int f = 0; f < 6; ++f) t.ambiguous[c] |= std::uint8_t(ambiguous_face(t, c, f) << f);
+  }
   t.boundary.assign(16 * t.loops.size(), 0);
   for (int key = 0; key < 256 * 64; ++key) {
     const i32 e = t.entry[key];
@@ -85,14 +96,12 @@ inline int loop_pair(int i, int j) { return i * (7 - i) / 2 + (j - i - 1); }
 // (x + 2 y + 4 z); config: their signs (bit v: v[v] >= level).
 inline int trilinear_pieces(const TrilinearTable &t, const double (&v)[8], unsigned config,
                             double level, int (&pieces)[4]) {
-  auto sign = [&](int c) { return int((config >> c) & 1); };
   // 1. faces: the asymptotic decider on each ambiguous face
   int faces = 0;
-  for (int f = 0; f < 6; ++f) {
+  for (int m = t.ambiguous[config]; m; m &= m - 1) {
+    const int f = ctz(std::uint64_t(m));
     const i32 *c = t.face_corners[f];
-    if (sign(c[0]) == sign(c[3]) && sign(c[1]) == sign(c[2]) && sign(c[0]) != sign(c[1])) {
-      if (asymptotic_joins_positive(v[c[0]], v[c[1]], v[c[2]], v[c[3]], level)) faces |= 1 << f;
-    }
+    if (asymptotic_joins_positive(v[c[0]], v[c[1]], v[c[2]], v[c[3]], level)) faces |= 1 << f;
   }
   const i32 e = t.entry[64 * config + faces];
   const int n = t.loops[e];

@@ -473,6 +473,15 @@ def native_trilinear_table():
 # --- the tests, in Python: the reference the C++ kernel is checked against ----------
 
 
+def asymptotic_joins_positive(f00, f10, f01, f11, level: float):
+    """The asymptotic decider on squares whose diagonal corners share signs
+    (corners 00, 10, 01, 11, the lower in-plane axis first; floats or arrays):
+    whether the bilinear saddle value is >= level. The same expression, in the
+    same order, as ``iso::asymptotic_joins_positive`` (src/common.hpp), so the
+    cap of ``--close`` and this reference decide faces as the kernels do."""
+    return (f00 * f11 - f10 * f01) / (f00 + f11 - f10 - f01) >= level
+
+
 def face_decisions(values: np.ndarray, level: float, config: int) -> int:
     """Face bits of one cube: the asymptotic decider on each ambiguous face.
 
@@ -482,9 +491,8 @@ def face_decisions(values: np.ndarray, level: float, config: int) -> int:
     amb = ambiguous_faces(config)
     for f, (c00, c10, c01, c11) in enumerate(FACE_CORNERS):
         if (amb >> f) & 1:
-            f00, f10, f01, f11 = (float(values[c]) for c in (c00, c10, c01, c11))
-            saddle = (f00 * f11 - f10 * f01) / (f00 + f11 - f10 - f01)
-            if saddle >= level:
+            corners = (float(values[c]) for c in (c00, c10, c01, c11))
+            if asymptotic_joins_positive(*corners, level):
                 faces |= 1 << f
     return faces
 

@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import IsoconvertError
 from ..extract.placement import reversed_orientation
 from ..extract.tables import DEFAULT_AMBIGUITY
+from ..extract.trilinear import asymptotic_joins_positive
 from ..mesh import Mesh
 from ..methods import TRILINEAR
 from ..volume import Volume, slabs
@@ -181,7 +182,7 @@ def close_at_grid(
                 f00, f10 = values[p, q], values[p + 1, q]
                 f01, f11 = values[p, q + 1], values[p + 1, q + 1]
                 with np.errstate(divide="ignore", invalid="ignore"):
-                    joins = (f00 * f11 - f10 * f01) / (f00 + f11 - f10 - f01) >= level
+                    joins = asymptotic_joins_positive(f00, f10, f01, f11, level)
                 groups.append((joined[c == 10], p[joins], q[joins]))
                 p, q = p[~joins], q[~joins]
             groups.append((tables[c], p, q))
