@@ -25,6 +25,7 @@ void bind_sample(nb::module_ &m);         // sample.cpp
 void bind_smooth(nb::module_ &m);         // smooth.cpp
 void bind_labels(nb::module_ &m);         // labels.cpp
 void bind_normals(nb::module_ &m);        // normals.cpp
+void bind_distance(nb::module_ &m);       // distance.cpp
 
 namespace {
 
@@ -232,4 +233,5 @@ NB_MODULE(_native, m) {
   bind_smooth(m);
   bind_labels(m);
   bind_normals(m);
+  bind_distance(m);
 }

@@ -352,8 +352,8 @@ class PostArgs:
     max_error: Annotated[
         float | None,
         typer.Option(
-            help="Decimate moving the surface at most this far (world units); alone, as far as "
-            "it allows."
+            help="Decimate keeping the result and the original within this distance of each "
+            "other, both ways (world units; a Hausdorff bound); alone, as far as it allows."
         ),
     ] = None
 

@@ -1,0 +1,337 @@
+"""Whole pipelines as users run them: isoconvert against the script they would write (issue 23).
+
+Run ``python bench/bench_pipeline.py`` (``--rounds N``, ``--quick`` for one round,
+``--only NAME ...`` for some pipelines). Every timing is one process from start to exit
+(interpreter start, imports, reading, extraction, post-processing, writing), as a user's
+shell sees it. Each pipeline's commands run once untimed (warm file cache), then in
+``--rounds`` rounds in a rotating order, so the commands of one round see the same
+machine; the ratio printed is the median over rounds of each round's ratio (isoconvert /
+the peer), beside the best and median times. The pipelines:
+
+- ``engine``: the engine scan (256x256x128 uint8, level 80.5): largest component, 20
+  smoothing iterations (windowed sinc, pass band 0.1), 90 % decimation, binary STL;
+  against pyvista (Flying Edges, ``connectivity("largest")``, ``smooth_taubin``, which is
+  VTK's windowed-sinc filter, and fast-simplification's ``simplify_mesh``). Target 0.5x.
+- ``atlas``: a 40-label 256^3 uint8 atlas (bench_labels' synthetic one, saved as .npy),
+  one PLY per label: ``isoconvert convert --labels`` (Surface Nets; with 16 relaxation
+  iterations, its default, and with ``--smooth 0``) against zmesh (per-label Marching
+  Cubes, one thread, ``close=True``, no smoothing; against ``--smooth 0``) and pyvista's
+  ``contour_labels(boundary_style="all")`` (vtkSurfaceNets3D, 16 iterations; against
+  the default), each label's triangles written by numpy and pyvista. Targets 1.0x zmesh,
+  0.5x pyvista.
+- ``normals``: a 384^3 float32 gyroid (raw) to binary PLY with and without ``--normals``.
+  Target 1.3x.
+- ``ct-bound``: the chest CT (DICOM series, 512x512x64, level 300.5 HU) decimated with
+  ``--max-error 1`` (mm) alone; no peer has a distance bound. Printed: time, triangles
+  removed, and both one-sided distances between the result and the undecimated surface,
+  measured with trimesh's closest-point queries (every original vertex to the result,
+  200,000 points sampled on the result to the original). Targets: under 15 s, over 70 %
+  removed, both distances at most 1.
+- ``ct-print``: the chest CT to a printable STL: largest component, cavities dropped, 10
+  smoothing iterations, decimation to a bound of 0.5 mm, capped at the grid's faces
+  (``--close``); against pydicom + scikit-image's ``marching_cubes`` + trimesh (largest
+  of ``split``, which drops the cavities too; ``filter_taubin``) + fast-simplification
+  (90 %: it has no bound) + trimesh's STL export (it has no capping).
+
+Data: the scans come from ``../shared/datasets`` (or ``$ISOCONVERT_DATASETS``); the
+pipelines that need a missing one are skipped. The peers (pyvista, fast-simplification,
+zmesh, pydicom, scikit-image) must be installed; a pipeline whose peer is missing is
+timed without it. The synthetic inputs and all outputs go to a temporary folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from bench_extract import DATASETS, gyroid
+from bench_labels import synthetic_atlas
+from bench_process import (
+    Command,
+    byte_compile_package,
+    isoconvert_exe,
+    ply_counts,
+    run_once,
+    time_rounds,
+)
+
+ENGINE = DATASETS / "engine_256x256x128_uint8.raw"
+CHEST_CT = DATASETS / "ct_chest_LIDC-IDRI-0314_dicom"
+CT_LEVEL = 300.5
+
+PYVISTA_ENGINE = '''\
+"""np.fromfile + pyvista: flying edges, largest, windowed sinc, fast-simplification, STL."""
+import sys
+
+import fast_simplification
+import numpy as np
+import pyvista as pv
+
+path, nx, ny, nz, dtype, level, iterations, reduction, out = sys.argv[1:]
+image = pv.ImageData(dimensions=(int(nx), int(ny), int(nz)))
+image.point_data["values"] = np.fromfile(path, dtype=dtype)
+surface = image.contour([float(level)], method="flying_edges")
+surface = surface.connectivity("largest")
+surface = surface.smooth_taubin(n_iter=int(iterations), pass_band=0.1)
+surface = fast_simplification.simplify_mesh(surface, target_reduction=float(reduction))
+surface.save(out, binary=True)
+'''
+
+ZMESH_LABELS = '''\
+"""np.load + zmesh (per-label Marching Cubes), one PLY per label."""
+import sys
+from pathlib import Path
+
+import numpy as np
+from zmesh import Mesher
+
+path, out = sys.argv[1:]
+mesher = Mesher((1, 1, 1))
+mesher.mesh(np.load(path), close=True)
+for label in mesher.ids():
+    if label:
+        mesh = mesher.get(label, normals=False)
+        Path(out, f"atlas_label{label}.ply").write_bytes(mesh.to_ply())
+'''
+
+PYVISTA_LABELS = '''\
+"""np.load + pyvista's contour_labels (vtkSurfaceNets3D), one PLY per label."""
+import sys
+
+import numpy as np
+import pyvista as pv
+
+path, out = sys.argv[1:]
+labels = np.load(path)
+image = pv.ImageData(dimensions=labels.shape[::-1])
+image.point_data["labels"] = labels.reshape(-1)
+surface = image.contour_labels(boundary_style="all")
+points, faces = surface.points, surface.regular_faces
+sides = np.asarray(surface.cell_data["boundary_labels"]).reshape(len(faces), -1)
+for label in np.unique(sides):
+    if label:
+        these = faces[(sides == label).any(axis=1)]
+        used, local = np.unique(these, return_inverse=True)
+        mesh = pv.PolyData.from_regular_faces(points[used], local.reshape(-1, 3))
+        mesh.save(f"{out}/atlas_label{label}.ply")
+'''
+
+SKIMAGE_CT_PRINT = '''\
+"""pydicom + scikit-image + trimesh + fast-simplification: a CT to a printable STL."""
+import sys
+from pathlib import Path
+
+import fast_simplification
+import numpy as np
+import pydicom
+import trimesh
+from skimage.measure import marching_cubes
+
+folder, level, iterations, reduction, out = sys.argv[1:]
+slices = [pydicom.dcmread(p) for p in sorted(Path(folder).glob("*.dcm"))]
+slices.sort(key=lambda s: float(s.ImagePositionPatient[2]))
+hu = np.stack([s.pixel_array * float(s.RescaleSlope) + float(s.RescaleIntercept) for s in slices])
+dz = abs(float(slices[1].ImagePositionPatient[2]) - float(slices[0].ImagePositionPatient[2]))
+dy, dx = (float(v) for v in slices[0].PixelSpacing)
+verts, faces, _, _ = marching_cubes(hu, float(level), spacing=(dz, dy, dx))
+mesh = trimesh.Trimesh(verts[:, ::-1], faces[:, ::-1])
+mesh = max(mesh.split(only_watertight=False), key=lambda m: len(m.faces))
+trimesh.smoothing.filter_taubin(mesh, iterations=int(iterations))
+points, triangles = fast_simplification.simplify(mesh.vertices, mesh.faces, float(reduction))
+trimesh.Trimesh(points, triangles).export(out, file_type="stl")
+'''
+
+
+def round_ratios(num: Command, den: Command) -> list[float]:
+    """Per-round ratios num / den (the rounds where both ran)."""
+    return [a / b for a, b in zip(num.seconds, den.seconds, strict=False)]
+
+
+def print_pipeline(title: str, commands: list[Command], pairs: list[tuple[str, str, float]]):
+    """Times of each command; for each (ours, theirs, target) the median per-round ratio."""
+    print(f"\n{title}")
+    head = f"{'command':<46}{'best s':>8}{'median s':>10}{'faces':>12}"
+    print(head)
+    print("-" * len(head))
+    for c in commands:
+        if not c.seconds:
+            print(f"{c.name:<46}  not timed: {c.note or 'no successful run'}")
+            continue
+        counts = ply_counts(c.output) if c.output and c.output.suffix == ".ply" else None
+        faces = f"{counts[1]:,}" if counts else ""
+        med = statistics.median(c.seconds)
+        print(f"{c.name:<46}{min(c.seconds):>8.3f}{med:>10.3f}{faces:>12}")
+    by_name = {c.name: c for c in commands}
+    for ours, theirs, target in pairs:
+        r = round_ratios(by_name[ours], by_name[theirs])
+        if not r:
+            print(f"{ours} / {theirs}: not measured")
+            continue
+        med = statistics.median(r)
+        verdict = "met" if med <= target else "NOT met"
+        print(
+            f"{ours} / {theirs}: {med:.2f} (rounds {min(r):.2f}-{max(r):.2f}); "
+            f"target {target}: {verdict}"
+        )
+
+
+def engine_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
+    dims = ["256", "256", "128"]
+    (tmp / "pv_engine.py").write_text(PYVISTA_ENGINE)
+    ours = tmp / "engine_iso.stl"
+    argv = [exe, "convert", str(ENGINE), "--shape", *dims, "--dtype", "uint8", "--level", "80.5"]
+    argv += ["--largest", "--smooth", "20", "--decimate", "0.9", "-o", str(ours), "-f", "-q"]
+    peer = [sys.executable, str(tmp / "pv_engine.py"), str(ENGINE), *dims, "uint8", "80.5"]
+    peer += ["20", "0.9", str(tmp / "engine_pv.stl")]
+    commands = [
+        Command("isoconvert convert", argv, ours),
+        Command("pyvista + fast-simplification script", peer, tmp / "engine_pv.stl"),
+    ]
+    return commands, [("isoconvert convert", "pyvista + fast-simplification script", 0.5)]
+
+
+def atlas_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
+    atlas = tmp / "atlas.npy"
+    np.save(atlas, np.ascontiguousarray(synthetic_atlas().data.T))
+    (tmp / "zmesh_labels.py").write_text(ZMESH_LABELS)
+    (tmp / "pv_labels.py").write_text(PYVISTA_LABELS)
+    folders = {}
+    for name in ("iso16", "iso0", "zmesh", "pyvista"):
+        folders[name] = tmp / f"atlas_{name}"
+        folders[name].mkdir()
+    base = [exe, "convert", str(atlas), "--labels", "--spacing", "1", "1", "1", "-f", "-q"]
+    commands = [
+        Command("isoconvert --labels", base + ["-o", str(folders["iso16"] / "atlas.ply")]),
+        Command(
+            "isoconvert --labels --smooth 0",
+            base + ["--smooth", "0", "-o", str(folders["iso0"] / "atlas.ply")],
+        ),
+        Command(
+            "zmesh script",
+            [sys.executable, str(tmp / "zmesh_labels.py"), str(atlas), str(folders["zmesh"])],
+        ),
+        Command(
+            "pyvista contour_labels script",
+            [sys.executable, str(tmp / "pv_labels.py"), str(atlas), str(folders["pyvista"])],
+        ),
+    ]
+    pairs = [
+        ("isoconvert --labels --smooth 0", "zmesh script", 1.0),
+        ("isoconvert --labels", "pyvista contour_labels script", 0.5),
+    ]
+    return commands, pairs
+
+
+def normals_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
+    raw = tmp / "gyroid_384.raw"
+    gyroid(384)().tofile(raw)
+    argv = [exe, "convert", str(raw), "--shape", "384", "384", "384", "--dtype", "float32"]
+    argv += ["--level", "0.1", "-f", "-q"]
+    commands = [
+        Command(
+            "isoconvert --normals", argv + ["--normals", "-o", str(tmp / "n.ply")], tmp / "n.ply"
+        ),
+        Command("isoconvert", argv + ["-o", str(tmp / "p.ply")], tmp / "p.ply"),
+    ]
+    return commands, [("isoconvert --normals", "isoconvert", 1.3)]
+
+
+def ct_print_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
+    (tmp / "sk_ct_print.py").write_text(SKIMAGE_CT_PRINT)
+    ours = tmp / "ct_iso.stl"
+    argv = [exe, "convert", str(CHEST_CT), "--level", str(CT_LEVEL), "--largest"]
+    argv += ["--fill-cavities", "--smooth", "10", "--max-error", "0.5", "--close"]
+    argv += ["-o", str(ours), "-f", "-q"]
+    peer = [sys.executable, str(tmp / "sk_ct_print.py"), str(CHEST_CT), str(CT_LEVEL), "10"]
+    peer += ["0.9", str(tmp / "ct_sk.stl")]
+    commands = [
+        Command("isoconvert convert", argv, ours),
+        Command("scikit-image + trimesh + fast-simplification", peer, tmp / "ct_sk.stl"),
+    ]
+    return commands, [("isoconvert convert", "scikit-image + trimesh + fast-simplification", 1.0)]
+
+
+def ct_bound(tmp: Path, exe: str, rounds: int) -> None:
+    """``--max-error 1`` on the chest CT: time, triangles removed, both distances."""
+    import trimesh
+
+    full, decimated = tmp / "ct_full.ply", tmp / "ct_bound.ply"
+    base = [exe, "convert", str(CHEST_CT), "--level", str(CT_LEVEL), "-f", "-q"]
+    undecimated = Command("undecimated", base + ["-o", str(full)])
+    if run_once(undecimated) is None:
+        print(f"\nct-bound: the undecimated surface failed: {undecimated.note}")
+        return
+    cmd = Command("isoconvert --max-error 1", base + ["--max-error", "1", "-o", str(decimated)])
+    time_rounds([cmd], rounds)
+    print("\nct-bound: chest CT 512x512x64, level 300.5 HU, --max-error 1 (mm)")
+    if not cmd.seconds:
+        print(f"not timed: {cmd.note}")
+        return
+    before = trimesh.load(full, process=False)
+    after = trimesh.load(decimated, process=False)
+    removed = 1 - len(after.faces) / len(before.faces)
+    # original -> result: every vertex of the undecimated surface
+    _, forward, _ = trimesh.proximity.closest_point(after, before.vertices)
+    # result -> original: points spread over the result's triangles
+    samples, _ = trimesh.sample.sample_surface(after, 200_000, seed=1)
+    _, backward, _ = trimesh.proximity.closest_point(before, samples)
+    med = statistics.median(cmd.seconds)
+    print(
+        f"median {med:.1f} s (best {min(cmd.seconds):.1f} s; target under 15 s: "
+        f"{'met' if med < 15 else 'NOT met'}); {len(before.faces):,} -> {len(after.faces):,} "
+        f"triangles, {100 * removed:.1f} % removed (target over 70 %: "
+        f"{'met' if removed > 0.7 else 'NOT met'})"
+    )
+    print(
+        f"original within {forward.max():.3f} of the result; result within "
+        f"{backward.max():.3f} of the original (sampled); bound 1 both ways: "
+        f"{'met' if max(forward.max(), backward.max()) <= 1 else 'NOT met'}"
+    )
+
+
+PIPELINES = {
+    "engine": ("engine 256x256x128: largest, smooth 20, decimate 0.9, STL", engine_pipeline),
+    "atlas": ("40-label 256^3 atlas: one PLY per label", atlas_pipeline),
+    "normals": ("gyroid 384^3 float32 -> PLY, with and without --normals", normals_pipeline),
+    "ct-print": ("chest CT -> printable STL", ct_print_pipeline),
+}
+NEEDS = {"engine": ENGINE, "ct-print": CHEST_CT, "ct-bound": CHEST_CT}
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--quick", action="store_true", help="one timed round")
+    names = [*PIPELINES, "ct-bound"]
+    parser.add_argument("--only", nargs="+", choices=names, default=names)
+    args = parser.parse_args(argv)
+    rounds = 1 if args.quick else args.rounds
+    exe = isoconvert_exe()
+    byte_compile_package()
+    print(
+        f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; {rounds} round(s); "
+        f"wall time per process; isoconvert = {exe}"
+    )
+    with tempfile.TemporaryDirectory(prefix="isoconvert-pipeline-") as name:
+        tmp = Path(name)
+        for key in args.only:
+            if key in NEEDS and not NEEDS[key].exists():
+                print(f"\n{key} skipped: {NEEDS[key]} not found (set ISOCONVERT_DATASETS)")
+                continue
+            if key == "ct-bound":
+                ct_bound(tmp, exe, rounds)
+                continue
+            title, build = PIPELINES[key]
+            commands, pairs = build(tmp, exe)
+            time_rounds(commands, rounds)
+            print_pipeline(title, commands, pairs)
+    print(f"\nload average at the end {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
