@@ -26,6 +26,7 @@ void bind_smooth(nb::module_ &m);         // smooth.cpp
 void bind_labels(nb::module_ &m);         // labels.cpp
 void bind_normals(nb::module_ &m);        // normals.cpp
 void bind_distance(nb::module_ &m);       // distance.cpp
+void bind_rays(nb::module_ &m);           // rays.cpp
 
 namespace {
 
@@ -234,4 +235,5 @@ NB_MODULE(_native, m) {
   bind_labels(m);
   bind_normals(m);
   bind_distance(m);
+  bind_rays(m);
 }

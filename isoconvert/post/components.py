@@ -13,8 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import IsoconvertError
-from ..graph import connected_components, ragged_pairs
+from ..graph import connected_components
 from ..mesh import Mesh
+from ..threads import kernel_threads
 
 #: Ray directions of the inside test: generic (no grid axis, no diagonal), so a ray
 #: through a triangle's edge or vertex has probability zero; three, for a majority.
@@ -210,7 +211,7 @@ def fill_cavities(mesh: Mesh) -> Mesh:
         pairs_b.append(cand_b[j])
     a_idx = np.concatenate(pairs_a) if pairs_a else np.zeros(0, np.int64)
     b_idx = np.concatenate(pairs_b) if pairs_b else np.zeros(0, np.int64)
-    inside = _inside(probe[a_idx], b_idx, tri_comp, corners)
+    inside = _inside(probe[a_idx], b_idx, tri_comp, vertices, cells)
     remove = np.zeros(n_comp, dtype=bool)
     remove[a_idx[inside]] = True
     record = {
@@ -253,8 +254,17 @@ def _volumes(mesh: Mesh, tri_comp: np.ndarray, n_comp: int) -> np.ndarray:
     return np.bincount(tri_comp, det, n_comp) / 6.0
 
 
-def _inside(points: np.ndarray, comps: np.ndarray, tri_comp: np.ndarray, corners: np.ndarray):
-    """(N,) bool: ``points[i]`` is inside closed component ``comps[i]``.
+def _inside(
+    points: np.ndarray,
+    comps: np.ndarray,
+    tri_comp: np.ndarray,
+    vertices: np.ndarray,
+    cells: np.ndarray,
+) -> np.ndarray:
+    """(N,) bool: ``points[i]`` is inside closed component ``comps[i]``: at
+    least two of the three rays ``_RAYS`` from it cross the component an odd
+    number of times (the compiled ``ray_parity_votes``, which meets only the
+    triangles whose shadow across each ray covers the point).
 
     Parameters
     ----------
@@ -262,38 +272,27 @@ def _inside(points: np.ndarray, comps: np.ndarray, tri_comp: np.ndarray, corners
     comps : (N,) int64
     tri_comp : (C,) int64
         Component of each triangle.
-    corners : (C, 3, 3) float64
-        Corner positions of each triangle.
+    vertices : (V, 3) float64
+    cells : (C, 3) int64
     """
+    from .. import _native
+
     if len(points) == 0:
         return np.zeros(0, dtype=bool)
     order = np.argsort(tri_comp, kind="stable")  # triangles grouped by component
     sizes = np.bincount(tri_comp)
     starts = np.cumsum(sizes) - sizes
-    counts = sizes[comps]
-    votes = np.zeros(len(points), dtype=np.int64)
-    for q0, q1, pid, offset in ragged_pairs(counts):
-        c = counts[q0:q1]
-        t = order[np.repeat(starts[comps[q0:q1]], c) + offset]
-        for ray in _RAYS:
-            hits = _ray_hits(points[pid], ray, corners[t])
-            parity = np.bincount(pid - q0, hits, q1 - q0).astype(np.int64) % 2
-            votes[q0:q1] += parity
+    votes = np.empty(len(points), dtype=np.int64)
+    _native.ray_parity_votes(
+        np.ascontiguousarray(vertices, dtype=np.float64),
+        np.ascontiguousarray(cells, dtype=np.int64),
+        order.astype(np.int64),
+        starts.astype(np.int64),
+        sizes.astype(np.int64),
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(comps, dtype=np.int64),
+        _RAYS,
+        kernel_threads(),
+        votes,
+    )
     return votes >= 2
-
-
-def _ray_hits(origins: np.ndarray, direction: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """(N,) bool: the ray from ``origins`` (N, 3) along ``direction`` (3,) crosses
-    triangle ``tris`` (N, 3 corners, 3) at a positive distance (Moller-Trumbore)."""
-    e1 = tris[:, 1] - tris[:, 0]
-    e2 = tris[:, 2] - tris[:, 0]
-    pvec = np.cross(direction, e2)
-    det = np.einsum("ij,ij->i", e1, pvec)
-    ok = det != 0
-    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    s = origins - tris[:, 0]
-    u = np.einsum("ij,ij->i", s, pvec) * inv
-    qvec = np.cross(s, e1)
-    v = (qvec @ direction) * inv
-    t = np.einsum("ij,ij->i", e2, qvec) * inv
-    return ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)

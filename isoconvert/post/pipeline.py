@@ -48,7 +48,8 @@ class PostOptions:
     decimate : float or None
         Fraction of triangles to remove, in [0, 1).
     max_error : float or None
-        Largest distance (world units) decimation may move the surface; alone,
+        Largest distance (world units) between the decimated and the original
+        surface, both ways (a Hausdorff bound); alone,
         decimates as far as it allows.
     """
 
