@@ -24,8 +24,9 @@ the peer), beside the best and median times. The pipelines:
 - ``ct-bound``: the chest CT (DICOM series, 512x512x64, level 300.5 HU) decimated with
   ``--max-error 1`` (mm) alone; no peer has a distance bound. Printed: time, triangles
   removed, and both one-sided distances between the result and the undecimated surface,
-  measured with trimesh's closest-point queries (every original vertex to the result,
-  200,000 points sampled on the result to the original). Targets: under 15 s, over 70 %
+  measured with trimesh's closest-point queries (every original vertex and 200,000
+  points sampled on the original to the result, 200,000 points sampled on the result
+  to the original). Targets: under 15 s, over 70 %
   removed, both distances at most 1.
 - ``ct-print``: the chest CT to a printable STL: largest component, cavities dropped, 10
   smoothing iterations, decimation to a bound of 0.5 mm, capped at the grid's faces
@@ -152,8 +153,9 @@ def round_ratios(num: Command, den: Command) -> list[float]:
     return [a / b for a, b in zip(num.seconds, den.seconds, strict=False)]
 
 
-def print_pipeline(title: str, commands: list[Command], pairs: list[tuple[str, str, float]]):
-    """Times of each command; for each (ours, theirs, target) the median per-round ratio."""
+def print_pipeline(title: str, commands: list[Command], pairs: list[tuple[str, str, float | None]]):
+    """Times of each command; for each (ours, theirs, target or None) the median
+    per-round ratio."""
     print(f"\n{title}")
     head = f"{'command':<46}{'best s':>8}{'median s':>10}{'faces':>12}"
     print(head)
@@ -173,11 +175,10 @@ def print_pipeline(title: str, commands: list[Command], pairs: list[tuple[str, s
             print(f"{ours} / {theirs}: not measured")
             continue
         med = statistics.median(r)
-        verdict = "met" if med <= target else "NOT met"
-        print(
-            f"{ours} / {theirs}: {med:.2f} (rounds {min(r):.2f}-{max(r):.2f}); "
-            f"target {target}: {verdict}"
-        )
+        line = f"{ours} / {theirs}: {med:.2f} (rounds {min(r):.2f}-{max(r):.2f})"
+        if target is not None:
+            line += f"; target {target}: {'met' if med <= target else 'NOT met'}"
+        print(line)
 
 
 def engine_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
@@ -253,7 +254,8 @@ def ct_print_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
         Command("isoconvert convert", argv, ours),
         Command("scikit-image + trimesh + fast-simplification", peer, tmp / "ct_sk.stl"),
     ]
-    return commands, [("isoconvert convert", "scikit-image + trimesh + fast-simplification", 1.0)]
+    # no target: the peer neither bounds its decimation nor caps the surface
+    return commands, [("isoconvert convert", "scikit-image + trimesh + fast-simplification", None)]
 
 
 def ct_bound(tmp: Path, exe: str, rounds: int) -> None:
@@ -275,8 +277,11 @@ def ct_bound(tmp: Path, exe: str, rounds: int) -> None:
     before = trimesh.load(full, process=False)
     after = trimesh.load(decimated, process=False)
     removed = 1 - len(after.faces) / len(before.faces)
-    # original -> result: every vertex of the undecimated surface
-    _, forward, _ = trimesh.proximity.closest_point(after, before.vertices)
+    # original -> result: every vertex of the undecimated surface, and points
+    # spread over its triangles
+    spread, _ = trimesh.sample.sample_surface(before, 200_000, seed=2)
+    points = np.concatenate([before.vertices, spread])
+    _, forward, _ = trimesh.proximity.closest_point(after, points)
     # result -> original: points spread over the result's triangles
     samples, _ = trimesh.sample.sample_surface(after, 200_000, seed=1)
     _, backward, _ = trimesh.proximity.closest_point(before, samples)
@@ -288,8 +293,9 @@ def ct_bound(tmp: Path, exe: str, rounds: int) -> None:
         f"{'met' if removed > 0.7 else 'NOT met'})"
     )
     print(
-        f"original within {forward.max():.3f} of the result; result within "
-        f"{backward.max():.3f} of the original (sampled); bound 1 both ways: "
+        f"original within {forward.max():.3f} of the result (its vertices and 200,000 "
+        f"points on it); result within {backward.max():.3f} of the original (200,000 "
+        f"points); bound 1 both ways: "
         f"{'met' if max(forward.max(), backward.max()) <= 1 else 'NOT met'}"
     )
 

@@ -128,8 +128,9 @@ void ray_votes(const double *v, const i64 *cells, const i64 *order, const i64 *s
         const double span[2] = {std::max(box[2] - box[0], 1e-300),
                                 std::max(box[3] - box[1], 1e-300)};
         auto cell = [&](double x, int a) {
-          const double f = (x - box[a]) / span[a] * double(side);
-          return std::min<i64>(side - 1, std::max<i64>(0, i64(std::floor(f))));
+          // clamped as a double first: a flat shadow makes f huge
+          const double f = std::floor((x - box[a]) / span[a] * double(side));
+          return i64(std::min(double(side - 1), std::max(0.0, f)));
         };
         offsets.assign(side * side + 1, 0);
         for (int pass = 0; pass < 2; ++pass) {
