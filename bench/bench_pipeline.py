@@ -52,14 +52,7 @@ from pathlib import Path
 import numpy as np
 from bench_extract import DATASETS, gyroid
 from bench_labels import synthetic_atlas
-from bench_process import (
-    Command,
-    byte_compile_package,
-    isoconvert_exe,
-    ply_counts,
-    run_once,
-    time_rounds,
-)
+from bench_process import Command, ply_counts, run_once, start, time_rounds
 
 ENGINE = DATASETS / "engine_256x256x128_uint8.raw"
 CHEST_CT = DATASETS / "ct_chest_LIDC-IDRI-0314_dicom"
@@ -317,12 +310,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--only", nargs="+", choices=names, default=names)
     args = parser.parse_args(argv)
     rounds = 1 if args.quick else args.rounds
-    exe = isoconvert_exe()
-    byte_compile_package()
-    print(
-        f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; {rounds} round(s); "
-        f"wall time per process; isoconvert = {exe}"
-    )
+    exe = start(rounds)
     with tempfile.TemporaryDirectory(prefix="isoconvert-pipeline-") as name:
         tmp = Path(name)
         for key in args.only:

@@ -307,15 +307,22 @@ def byte_compile_package() -> None:
         compileall.compile_dir(folder, quiet=1)
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Run the timings and print their tables."""
-    args = parse_args(argv)
+def start(rounds: int) -> str:
+    """Byte-compile the package, print the machine's line, and return the isoconvert
+    command to time."""
     exe = isoconvert_exe()
     byte_compile_package()
     print(
-        f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; {args.repeat} timed "
+        f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; {rounds} timed "
         f"round(s); wall time per process; isoconvert = {exe}"
     )
+    return exe
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run the timings and print their tables."""
+    args = parse_args(argv)
+    exe = start(args.repeat)
     with tempfile.TemporaryDirectory(prefix="isoconvert-bench-") as name:
         tmp = Path(name)
         (tmp / "skimage_trimesh.py").write_text(SKIMAGE_SCRIPT)
