@@ -22,26 +22,18 @@ def connected_components(n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
 
     Notes
     -----
-    Min-label hooking with pointer jumping: every round hooks each edge's larger
-    root onto its smaller one, then flattens the trees; rounds stop when no edge
-    joins two labels. Each round is a few vectorized passes over the edges.
+    Union-find in the compiled ``connected_components`` (src/graph.cpp), the
+    larger root always linked under the smaller.
     """
-    labels = np.arange(n, dtype=np.int64)
-    u = np.asarray(u, dtype=np.int64)
-    v = np.asarray(v, dtype=np.int64)
-    while len(u):
-        lu, lv = labels[u], labels[v]
-        differ = lu != lv
-        if not differ.any():
-            break
-        u, v = u[differ], v[differ]
-        lu, lv = lu[differ], lv[differ]
-        np.minimum.at(labels, np.maximum(lu, lv), np.minimum(lu, lv))
-        while True:
-            jumped = labels[labels]
-            if np.array_equal(jumped, labels):
-                break
-            labels = jumped
+    from . import _native
+
+    labels = np.empty(n, dtype=np.int64)
+    _native.connected_components(
+        int(n),
+        np.ascontiguousarray(u, dtype=np.int64).reshape(-1),
+        np.ascontiguousarray(v, dtype=np.int64).reshape(-1),
+        labels,
+    )
     return labels
 
 

@@ -27,6 +27,7 @@ void bind_labels(nb::module_ &m);         // labels.cpp
 void bind_normals(nb::module_ &m);        // normals.cpp
 void bind_distance(nb::module_ &m);       // distance.cpp
 void bind_rays(nb::module_ &m);           // rays.cpp
+void bind_graph(nb::module_ &m);          // graph.cpp
 
 namespace {
 
@@ -236,4 +237,5 @@ NB_MODULE(_native, m) {
   bind_normals(m);
   bind_distance(m);
   bind_rays(m);
+  bind_graph(m);
 }

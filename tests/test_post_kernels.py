@@ -1,6 +1,6 @@
-"""The distance kernels behind decimation's two-sided bound: point-to-mesh
-distances against trimesh, and the certificate against surfaces whose
-distance is known in closed form."""
+"""The compiled kernels of post-processing: point-to-mesh distances against
+trimesh, the distance certificate against surfaces whose distance is known in
+closed form, and connected components against scipy."""
 
 from __future__ import annotations
 
@@ -77,3 +77,22 @@ def test_corner_distances_count_and_shared_triangles_are_at_distance_zero():
     assert failed.all()
     reach, failed = within_bound(both, triangles, grid, triangles, 1e-9)
     assert reach == 0.0 and not failed.any()
+
+
+@pytest.mark.parametrize("n, m", [(1, 0), (12, 7), (50_000, 40_000), (50_000, 150_000)])
+def test_components_are_scipys_labelled_by_their_smallest_node(n, m):
+    """The compiled union-find behind every component count (largest, smoothing's
+    small-component hold, decimation's guard, the report) against scipy's."""
+    import scipy.sparse
+    import scipy.sparse.csgraph
+
+    from isoconvert.graph import connected_components
+
+    rng = np.random.default_rng(n + m)
+    u, v = rng.integers(0, n, m), rng.integers(0, n, m)
+    labels = connected_components(n, u, v)
+    graph = scipy.sparse.coo_matrix((np.ones(m), (u, v)), shape=(n, n))
+    count, theirs = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    smallest = np.full(count, n)
+    np.minimum.at(smallest, theirs, np.arange(n))
+    assert (labels == smallest[theirs]).all()
