@@ -23,13 +23,14 @@ def _report_result(result, target, required, examples, force, quiet) -> list[str
     checked = check_mesh(result.written, examples=examples, source=str(result.output), grid=grid)
     changed = None
     if result.extracted is not None and not (quiet and target in (None, "-")):
-        from ..post.pipeline import changes
+        from ..post.pipeline import bound_lines, changes
         from ..writers.stored import stored_mesh
 
         # both as the file stores them (STL: three vertices per triangle)
         extracted = stored_mesh(result.extracted, result.format, result.ascii)
         before = check_mesh(extracted, examples=0, grid=grid).to_dict()
         changed = changes(before, checked.to_dict()) or ["nothing the report measures"]
+        changed += bound_lines(result.mesh.info)
         if not quiet:
             print(f"{result.output}: post-processing changed:", file=sys.stderr)
             for line in changed:

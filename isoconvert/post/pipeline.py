@@ -308,4 +308,21 @@ def changes(before: dict, after: dict) -> list[str]:
     return lines
 
 
-__all__ = ["EmptyMeshError", "PostOptions", "changes", "post_process"]
+def bound_lines(info: dict) -> list[str]:
+    """Lines giving the distance bound a decimation with ``max_error`` certified,
+    from a post-processed mesh's ``info`` (none without one). The bound is
+    between decimation's input and output: after the steps before it (closing,
+    clean-up, smoothing), not the extracted surface."""
+    record = info.get("decimation") or {}
+    bound = record.get("max_error")
+    there, back = record.get("input_to_result"), record.get("result_to_input")
+    if bound is None or there is None or back is None:
+        return []
+    unit = f" {info['unit']}" if info.get("unit") else ""
+    return [
+        f"decimation: its input and its result within {bound:g}{unit} of each other, both "
+        f"ways (certified: input to result at most {there:.7g}, result to input {back:.7g})"
+    ]
+
+
+__all__ = ["EmptyMeshError", "PostOptions", "bound_lines", "changes", "post_process"]
