@@ -239,12 +239,14 @@ class TriangleGrid {
 
   // Whether each triangle (over `v`) lies within `bound` of this mesh:
   // certified by the 1-Lipschitz distance (a triangle whose corners lie
-  // within d lies within d + its cover radius), splitting uncertified ones
-  // into four at their edges' midpoints, at most `depth` times. `reach`: the
-  // certified bound, or the largest distance measured where it fails;
-  // `failed`: 1 where a point is farther than `bound`, 2 where `depth`
-  // halvings did not certify it. `corner_distance` (V,): each vertex's
-  // distance to this mesh, measured before.
+  // within d lies within d + its cover radius), or by convexity (the distance
+  // to one triangle of the mesh is convex, so a piece whose corners all lie
+  // within the bound of the nearest triangle of one of them lies within it),
+  // splitting uncertified ones into four at their edges' midpoints, at most
+  // `depth` times. `reach`: the certified bound, or the largest distance
+  // measured where it fails; `failed`: 1 where a point is farther than
+  // `bound`, 2 where `depth` halvings did not certify it. `corner_distance`
+  // (V,): each vertex's distance to this mesh, measured before.
   void certify(const double *v, const i64 *t, i64 n, const double *corner_distance,
                double bound, int depth, int threads, double *reach,
                std::uint8_t *failed) const {
@@ -252,6 +254,7 @@ class TriangleGrid {
       struct Piece {
         Vec p[3];
         double d[3];
+        i64 near[3];  // the nearest triangle of each corner (-1: not known)
         int level;
       };
       std::vector<Piece> stack;
@@ -261,18 +264,38 @@ class TriangleGrid {
           const double *c = v + 3 * t[3 * f + q];
           top.p[q] = {c[0], c[1], c[2]};
           top.d[q] = corner_distance[t[3 * f + q]];
+          top.near[q] = -1;
         }
         top.level = 0;
         stack.assign(1, top);
         double worst = 0.0;
         std::uint8_t status = 0;
         while (!stack.empty() && !status) {
-          const Piece piece = stack.back();
+          Piece piece = stack.back();
           stack.pop_back();
           const double far = std::max(std::max(piece.d[0], piece.d[1]), piece.d[2]);
           const double r = far + cover_radius(piece.p[0], piece.p[1], piece.p[2]);
           if (r <= bound) {
             worst = std::max(worst, r);
+            continue;
+          }
+          // the distance to one triangle of the mesh is convex, so the piece
+          // lies within the largest distance of its corners to that triangle
+          if (piece.level == 0) {
+            for (int q = 0; q < 3; ++q) nearest_sq(piece.p[q], piece.near[q]);
+          }
+          double convex = std::numeric_limits<double>::infinity();
+          for (int q = 0; q < 3; ++q) {
+            const i64 g = piece.near[q];
+            if (g < 0 || (q > 0 && g == piece.near[0]) || (q > 1 && g == piece.near[1])) continue;
+            double most = 0.0;
+            for (int k = 0; k < 3; ++k) {
+              most = std::max(most, triangle_sq(piece.p[k], corner(g, 0), corner(g, 1), corner(g, 2)));
+            }
+            convex = std::min(convex, std::sqrt(most));
+          }
+          if (convex <= bound) {
+            worst = std::max(worst, convex);
             continue;
           }
           if (piece.level == depth) {
@@ -282,11 +305,11 @@ class TriangleGrid {
           }
           Vec m[3];
           double dm[3];
+          i64 nm[3];
           for (int q = 0; q < 3; ++q) {
             const Vec &a = piece.p[q], &b = piece.p[(q + 1) % 3];
             m[q] = {0.5 * (a.x + b.x), 0.5 * (a.y + b.y), 0.5 * (a.z + b.z)};
-            i64 unused;
-            dm[q] = std::sqrt(nearest_sq(m[q], unused));
+            dm[q] = std::sqrt(nearest_sq(m[q], nm[q]));
             if (dm[q] > bound) {
               status = 1;
               worst = std::max(worst, dm[q]);
@@ -295,10 +318,13 @@ class TriangleGrid {
           if (status) break;
           // m[0] on p0-p1, m[1] on p1-p2, m[2] on p2-p0
           const int lv = piece.level + 1;
-          stack.push_back({{piece.p[0], m[0], m[2]}, {piece.d[0], dm[0], dm[2]}, lv});
-          stack.push_back({{m[0], piece.p[1], m[1]}, {dm[0], piece.d[1], dm[1]}, lv});
-          stack.push_back({{m[2], m[1], piece.p[2]}, {dm[2], dm[1], piece.d[2]}, lv});
-          stack.push_back({{m[0], m[1], m[2]}, {dm[0], dm[1], dm[2]}, lv});
+          const Vec *p = piece.p;
+          const double *d = piece.d;
+          const i64 *e = piece.near;
+          stack.push_back({{p[0], m[0], m[2]}, {d[0], dm[0], dm[2]}, {e[0], nm[0], nm[2]}, lv});
+          stack.push_back({{m[0], p[1], m[1]}, {dm[0], d[1], dm[1]}, {nm[0], e[1], nm[1]}, lv});
+          stack.push_back({{m[2], m[1], p[2]}, {dm[2], dm[1], d[2]}, {nm[2], nm[1], e[2]}, lv});
+          stack.push_back({{m[0], m[1], m[2]}, {dm[0], dm[1], dm[2]}, {nm[0], nm[1], nm[2]}, lv});
         }
         reach[f] = worst;
         failed[f] = status;

@@ -96,3 +96,18 @@ def test_components_are_scipys_labelled_by_their_smallest_node(n, m):
     smallest = np.full(count, n)
     np.minimum.at(smallest, theirs, np.arange(n))
     assert (labels == smallest[theirs]).all()
+
+
+def test_a_parallel_lid_is_certified_at_its_height_by_convexity():
+    """A triangle 0.01 above a coplanar copy of itself: its distance to that one
+    triangle is convex, so its corners' (0.01) bound it everywhere. The Lipschitz
+    bound alone (0.01 plus a cover radius) would need pieces a hundredth of that
+    size: far past the six halvings the certificate allows."""
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 0.01], [1, 0, 0.01], [0, 1, 0.01]])
+    below, lid = np.array([[0, 1, 2]]), np.array([[3, 4, 5]])
+    grid = TriangleGrid(vertices.astype(float), below, 1.0)
+    corner = np.array([0.0, 0.0, 0.0, 0.01, 0.01, 0.01])
+    reach, failed = within_bound(vertices.astype(float), lid, grid, below, 0.0101, corner)
+    assert not failed.any() and abs(reach - 0.01) < 1e-12
+    _, failed = within_bound(vertices.astype(float), lid, grid, below, 0.0099, corner)
+    assert failed.all()

@@ -133,9 +133,10 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
       (a Hausdorff distance of at most D), certified, not sampled: the distance
       of every input vertex to the output is measured exactly (float64
       point-to-triangle distances), and each triangle of either surface is then
-      certified by :func:`within_bound` (the distance is 1-Lipschitz, so a
-      triangle lies within its corners' distance plus its cover radius;
-      uncertain triangles are split and measured again). The library's own
+      certified by :func:`within_bound` (the distance is 1-Lipschitz, and
+      convex to each triangle; uncertain triangles are split and measured
+      again). The result's triangles certified onto the input stay certified
+      in later collapses. The library's own
       error is only an estimate, so where an input vertex lies too far, it and
       its neighbours are locked, the library's limit is lowered a little, and
       the collapse redone (in the last attempts the limit is lowered by how far
@@ -179,6 +180,7 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
     limit = _FIRST_LIMIT * radius if max_error is not None else float(np.finfo(np.float32).max)
     guard = _TopologyGuard(vertices, cells)
     input_grid = TriangleGrid(vertices, cells, radius) if max_error is not None else None
+    certified = Certified()  # the result's triangles certified onto the input so far
     # what is wrong with the input stays as it is: collapses never touch it
     locked = guard.input_problems.copy()
 
@@ -224,8 +226,9 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
         if failed.any():
             locked |= guard.around(_vertices_of(cells[failed], len(vertices)))
             continue
-        # and every point of the result within the bound of the input
-        surface, failed = within_bound(vertices, out, input_grid, cells, bound)
+        # and every point of the result within the bound of the input (triangles
+        # certified in an earlier collapse stay so: the input does not change)
+        surface, failed = within_bound(vertices, out, input_grid, cells, bound, known=certified)
         if not failed.any():
             break
         # lock the input the failing triangles replaced (the input vertices nearest
@@ -445,18 +448,22 @@ def within_bound(
     onto: np.ndarray,
     bound: float,
     corner_distance: np.ndarray | None = None,
+    known: Certified | None = None,
 ) -> tuple[float, np.ndarray]:
     """Whether every point of ``triangles`` lies within ``bound`` of the surface
     of ``onto`` (both over ``vertices``), certified triangle by triangle.
 
-    The distance to a surface is 1-Lipschitz, so a triangle whose corners lie
-    within ``d`` of it lies within ``d + r``, ``r`` the farthest its points are
-    from their nearest corner (the circumradius of an acute triangle). A
-    triangle that is also one of ``onto``'s is at distance 0; the others
-    start with their corners' distances and are split into four by their
-    edges' midpoints, measured there, until every piece is certified (or a
-    point is found farther than ``bound``, or ``_MAX_DEPTH`` halvings do not
-    suffice: then the triangle fails). The compiled ``TriangleGrid.certify``
+    Two certificates, for a triangle or a piece of one: the distance to a
+    surface is 1-Lipschitz, so a piece whose corners lie within ``d`` of it lies
+    within ``d + r``, ``r`` the farthest its points are from their nearest
+    corner (the circumradius of an acute triangle); and the distance to one
+    triangle of ``onto`` is convex, so a piece lies within the largest distance
+    of its corners to the nearest triangle of one of them. A triangle that is
+    also one of ``onto``'s is at distance 0; the others start with their
+    corners' distances and are split into four by their edges' midpoints,
+    measured there, until every piece is certified (or a point is found
+    farther than ``bound``, or ``_MAX_DEPTH`` halvings do not suffice: then
+    the triangle fails). The compiled ``TriangleGrid.certify``
     does the splitting. Applied both ways (the input onto the result, the
     result onto the input), this bounds the Hausdorff distance.
 
@@ -473,6 +480,9 @@ def within_bound(
     corner_distance : (V,) float64 or None
         Each vertex's distance to ``onto`` where known (None: every vertex of
         ``triangles`` is one of ``onto``'s, at distance 0).
+    known : Certified or None
+        Triangles certified before against the same ``onto`` (skipped), which
+        gains those certified now.
 
     Returns
     -------
@@ -483,15 +493,41 @@ def within_bound(
         The triangles not certified within ``bound``.
     """
     failed = np.zeros(len(triangles), dtype=bool)
-    fresh = np.flatnonzero(~_rows_in(triangles, onto))
+    skip = _rows_in(triangles, onto)
+    if known is not None and len(known.rows):
+        skip |= _rows_in(triangles, known.rows)
+    fresh = np.flatnonzero(~skip)
+    before = known.reach if known is not None else 0.0
     if not len(fresh):
-        return 0.0, failed
+        return before, failed
     if corner_distance is None:
         corner_distance = np.zeros(len(vertices))
     reach, status = grid.certify(vertices, triangles[fresh], corner_distance, bound, _MAX_DEPTH)
     failed[fresh] = status > 0
-    worst = reach[status > 0] if failed.any() else reach
-    return float(worst.max()), failed
+    good = status == 0
+    if known is not None and good.any():
+        known.rows = np.concatenate([known.rows, triangles[fresh[good]]])
+        known.reach = max(known.reach, float(reach[good].max()))
+    if failed.any():
+        return float(reach[~good].max()), failed
+    return max(before, float(reach.max())), failed
+
+
+class Certified:
+    """Triangles certified within a bound of a surface that does not change
+    (decimation's input), kept across collapses: most of the result's
+    triangles survive from one collapse to the next, and need no second look.
+
+    Attributes
+    ----------
+    rows : (K, 3) int64
+    reach : float
+        The largest certified bound among them.
+    """
+
+    def __init__(self) -> None:
+        self.rows = np.zeros((0, 3), dtype=np.int64)
+        self.reach = 0.0
 
 
 def _vertices_of(triangles: np.ndarray, n: int) -> np.ndarray:
