@@ -57,7 +57,7 @@ import numpy as np
 
 from ..errors import IsoconvertError
 from ..geometry import normalized_grid
-from ..graph import connected_components, topology
+from ..graph import connected_components, group_rows, topology
 from ..mesh import Mesh
 from ..threads import kernel_threads
 
@@ -397,9 +397,8 @@ class _Stencil:
         neighbour = np.concatenate([b[take_ab], a[take_ba]])
         # in compressed rows for the compiled kernel: vertex i's neighbours are
         # neighbours[offsets[i] : offsets[i + 1]]
-        counts = np.bincount(target, minlength=n)
-        self.offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        self.neighbours = np.ascontiguousarray(neighbour[np.argsort(target, kind="stable")])
+        self.offsets, self.neighbours = group_rows(n, target, neighbour)
+        counts = np.diff(self.offsets)
         self.threads = kernel_threads()
         count = counts.astype(np.float64)
         self.still = np.flatnonzero(count == 0)
