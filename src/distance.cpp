@@ -108,9 +108,10 @@ struct Grid {
 // 0.8x the time of buckets as large as the box). Doubled while the grid would
 // have far more buckets than triangles (any size gives the same answers).
 // Points outside the grid are farther than the radius from every triangle.
-Grid build_grid(const double *v, const i64 *t, i64 n_tri, double radius) {
+// `box`: each triangle's bounding box (lower x, y, z, upper x, y, z).
+Grid build_grid(const std::vector<double> &box, i64 n_tri, double radius) {
   Grid g;
-  std::vector<double> lo(3 * n_tri), hi(3 * n_tri), extent(n_tri);
+  std::vector<double> extent(n_tri);
   double mn[3], mx[3];
   for (int k = 0; k < 3; ++k) {
     mn[k] = std::numeric_limits<double>::infinity();
@@ -119,12 +120,9 @@ Grid build_grid(const double *v, const i64 *t, i64 n_tri, double radius) {
   for (i64 f = 0; f < n_tri; ++f) {
     double e = 0.0;
     for (int k = 0; k < 3; ++k) {
-      const double a = v[3 * t[3 * f] + k], b = v[3 * t[3 * f + 1] + k], c = v[3 * t[3 * f + 2] + k];
-      lo[3 * f + k] = std::min(std::min(a, b), c) - radius;
-      hi[3 * f + k] = std::max(std::max(a, b), c) + radius;
-      e = std::max(e, hi[3 * f + k] - lo[3 * f + k]);
-      mn[k] = std::min(mn[k], lo[3 * f + k]);
-      mx[k] = std::max(mx[k], hi[3 * f + k]);
+      e = std::max(e, box[6 * f + 3 + k] - box[6 * f + k] + 2.0 * radius);
+      mn[k] = std::min(mn[k], box[6 * f + k] - radius);
+      mx[k] = std::max(mx[k], box[6 * f + 3 + k] + radius);
     }
     extent[f] = e;
   }
@@ -139,39 +137,19 @@ Grid build_grid(const double *v, const i64 *t, i64 n_tri, double radius) {
     g.size *= 2.0;
   }
   for (int k = 0; k < 3; ++k) g.dims[k] = i64(std::floor((mx[k] - mn[k]) / g.size)) + 2;
-  const double o[3] = {mn[0], mn[1], mn[2]};
-  const i64 n_buckets = g.dims[0] * g.dims[1] * g.dims[2];
-  g.offsets.assign(n_buckets + 1, 0);
-  auto span = [&](i64 f, i64 (&first)[3], i64 (&last)[3]) {
+  auto each = [&](i64 f, auto &&emit) {
+    i64 first[3], last[3];
     for (int k = 0; k < 3; ++k) {
-      first[k] = i64(std::floor((lo[3 * f + k] - o[k]) / g.size));
-      last[k] = i64(std::floor((hi[3 * f + k] - o[k]) / g.size));
+      first[k] = i64(std::floor((box[6 * f + k] - radius - mn[k]) / g.size));
+      last[k] = i64(std::floor((box[6 * f + 3 + k] + radius - mn[k]) / g.size));
     }
-  };
-  for (int pass = 0; pass < 2; ++pass) {
-    std::vector<i64> fill;
-    if (pass == 1) {
-      for (i64 b = 0; b < n_buckets; ++b) g.offsets[b + 1] += g.offsets[b];
-      g.triangles.resize(g.offsets[n_buckets]);
-      fill.assign(g.offsets.begin(), g.offsets.end() - 1);
-    }
-    for (i64 f = 0; f < n_tri; ++f) {
-      i64 first[3], last[3];
-      span(f, first, last);
-      for (i64 z = first[2]; z <= last[2]; ++z) {
-        for (i64 y = first[1]; y <= last[1]; ++y) {
-          for (i64 x = first[0]; x <= last[0]; ++x) {
-            const i64 b = x + g.dims[0] * (y + g.dims[1] * z);
-            if (pass == 0) {
-              ++g.offsets[b + 1];
-            } else {
-              g.triangles[fill[b]++] = f;
-            }
-          }
-        }
+    for (i64 z = first[2]; z <= last[2]; ++z) {
+      for (i64 y = first[1]; y <= last[1]; ++y) {
+        for (i64 x = first[0]; x <= last[0]; ++x) emit(x + g.dims[0] * (y + g.dims[1] * z));
       }
     }
-  }
+  };
+  iso::fill_buckets(n_tri, g.dims[0] * g.dims[1] * g.dims[2], each, g.offsets, g.triangles);
   return g;
 }
 
@@ -181,7 +159,6 @@ class TriangleGrid {
  public:
   TriangleGrid(std::vector<double> v, std::vector<i64> t, double radius)
       : v_(std::move(v)), t_(std::move(t)), n_tri_(i64(t_.size() / 3)) {
-    if (n_tri_) g_ = build_grid(v_.data(), t_.data(), n_tri_, radius);
     box_.resize(6 * n_tri_);
     for (i64 f = 0; f < n_tri_; ++f) {
       for (int k = 0; k < 3; ++k) {
@@ -191,6 +168,7 @@ class TriangleGrid {
         box_[6 * f + 3 + k] = std::max(std::max(a, b), c);
       }
     }
+    if (n_tri_) g_ = build_grid(box_, n_tri_, radius);
   }
 
   // Squared distance from q to the nearest triangle and that triangle (inf

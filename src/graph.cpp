@@ -6,6 +6,7 @@
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 
+#include <algorithm>
 #include <stdexcept>
 #include <vector>
 
@@ -46,11 +47,10 @@ void components(i64 n, const i64 *u, const i64 *v, i64 m, i64 *labels) {
 // Values grouped by row, each row's in their input order (a stable counting
 // sort): the compressed rows of a stencil without numpy's argsort.
 void group_rows(i64 n, const i64 *row, const i64 *value, i64 m, i64 *offsets, i64 *out) {
-  for (i64 i = 0; i <= n; ++i) offsets[i] = 0;
-  for (i64 e = 0; e < m; ++e) ++offsets[row[e] + 1];
-  for (i64 i = 0; i < n; ++i) offsets[i + 1] += offsets[i];
-  std::vector<i64> fill(offsets, offsets + n);
-  for (i64 e = 0; e < m; ++e) out[fill[row[e]]++] = value[e];
+  std::vector<i64> starts, items;
+  iso::fill_buckets(m, n, [&](i64 e, auto &&emit) { emit(row[e]); }, starts, items);
+  std::copy(starts.begin(), starts.end(), offsets);
+  for (i64 e = 0; e < m; ++e) out[e] = value[items[e]];
 }
 
 }  // namespace

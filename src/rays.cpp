@@ -132,28 +132,14 @@ void ray_votes(const double *v, const i64 *cells, const i64 *order, const i64 *s
           const double f = std::floor((x - box[a]) / span[a] * double(side));
           return i64(std::min(double(side - 1), std::max(0.0, f)));
         };
-        offsets.assign(side * side + 1, 0);
-        for (int pass = 0; pass < 2; ++pass) {
-          std::vector<i64> fill;
-          if (pass == 1) {
-            for (i64 b = 0; b < side * side; ++b) offsets[b + 1] += offsets[b];
-            bucket.resize(offsets[side * side]);
-            fill.assign(offsets.begin(), offsets.end() - 1);
+        auto each = [&](i64 k, auto &&emit) {
+          const i64 x0 = cell(lo[2 * k], 0), x1 = cell(hi[2 * k], 0);
+          const i64 y0 = cell(lo[2 * k + 1], 1), y1 = cell(hi[2 * k + 1], 1);
+          for (i64 y = y0; y <= y1; ++y) {
+            for (i64 x = x0; x <= x1; ++x) emit(y * side + x);
           }
-          for (i64 k = 0; k < n_tri; ++k) {
-            const i64 x0 = cell(lo[2 * k], 0), x1 = cell(hi[2 * k], 0);
-            const i64 y0 = cell(lo[2 * k + 1], 1), y1 = cell(hi[2 * k + 1], 1);
-            for (i64 y = y0; y <= y1; ++y) {
-              for (i64 x = x0; x <= x1; ++x) {
-                if (pass == 0) {
-                  ++offsets[y * side + x + 1];
-                } else {
-                  bucket[fill[y * side + x]++] = k;
-                }
-              }
-            }
-          }
-        }
+        };
+        iso::fill_buckets(n_tri, side * side, each, offsets, bucket);
         for (i64 q = group_start[g]; q < group_start[g + 1]; ++q) {
           const i64 i = by[q];
           const double *o = points + 3 * i;
