@@ -37,33 +37,6 @@ def connected_components(n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return labels
 
 
-def group_rows(n: int, rows: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Compressed rows: ``values`` grouped by ``rows``, each row's in their input
-    order (``values[np.argsort(rows, kind="stable")]``, by a compiled counting sort).
-
-    Parameters
-    ----------
-    n : int
-        Rows; every entry of ``rows`` is in ``0..n-1``.
-    rows, values : (E,) int64
-
-    Returns
-    -------
-    offsets : (n + 1,) int64
-        Row i's values are ``grouped[offsets[i] : offsets[i + 1]]``.
-    grouped : (E,) int64
-    """
-    from . import _native
-
-    rows = np.ascontiguousarray(rows, dtype=np.int64).reshape(-1)
-    offsets = np.empty(n + 1, dtype=np.int64)
-    grouped = np.empty(len(rows), dtype=np.int64)
-    _native.group_rows(
-        int(n), rows, np.ascontiguousarray(values, dtype=np.int64).reshape(-1), offsets, grouped
-    )
-    return offsets, grouped
-
-
 def mix64(x: np.ndarray) -> np.ndarray:
     """splitmix64's finalizer: spreads every input bit over the whole word."""
     with np.errstate(over="ignore"):

@@ -7,6 +7,8 @@
 
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "placement.hpp"
 #include "rows.hpp"
@@ -24,6 +26,15 @@ using Doubles = nb::ndarray<const double, nb::c_contig, nb::device::cpu>;
 // pages, which makes their first write several times cheaper) and filled here.
 template <class T>
 using Out = nb::ndarray<T, nb::c_contig, nb::device::cpu>;
+
+// A numpy array that owns `v` (moved to the heap): (n,) or (n / cols, cols).
+template <class T, class A>
+nb::object give(std::vector<T, A> &&v, size_t cols = 0) {
+  auto *heap = new std::vector<T, A>(std::move(v));
+  nb::capsule owner(heap, [](void *p) noexcept { delete static_cast<std::vector<T, A> *>(p); });
+  const size_t shape[2] = {cols ? heap->size() / cols : heap->size(), cols};
+  return nb::cast(nb::ndarray<nb::numpy, T>(heap->data(), cols ? 2 : 1, shape, owner));
+}
 
 template <class T>
 void check_out(const Out<T> &a, i64 rows, i64 cols, const char *name) {

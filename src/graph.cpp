@@ -44,15 +44,6 @@ void components(i64 n, const i64 *u, const i64 *v, i64 m, i64 *labels) {
   for (i64 i = 0; i < n; ++i) labels[i] = labels[labels[i]];
 }
 
-// Values grouped by row, each row's in their input order (a stable counting
-// sort): the compressed rows of a stencil without numpy's argsort.
-void group_rows(i64 n, const i64 *row, const i64 *value, i64 m, i64 *offsets, i64 *out) {
-  std::vector<i64> starts, items;
-  iso::fill_buckets(m, n, [&](i64 e, auto &&emit) { emit(row[e]); }, starts, items);
-  std::copy(starts.begin(), starts.end(), offsets);
-  for (i64 e = 0; e < m; ++e) out[e] = value[items[e]];
-}
-
 }  // namespace
 
 void bind_graph(nb::module_ &m) {
@@ -74,23 +65,4 @@ void bind_graph(nb::module_ &m) {
       },
       "n"_a, "u"_a, "v"_a, "labels"_a.noconvert(),
       "For each node, the smallest node of its component.");
-  m.def(
-      "group_rows",
-      [](i64 n, Int64s row, Int64s value, Out<i64> offsets, Out<i64> out) {
-        if (n < 0 || row.ndim() != 1 || value.ndim() != 1 || row.shape(0) != value.shape(0)) {
-          throw std::invalid_argument("group_rows: n >= 0, row and value (E,) alike");
-        }
-        const i64 e = i64(row.shape(0));
-        check_out(offsets, n + 1, 0, "offsets");
-        check_out(out, e, 0, "out");
-        for (i64 k = 0; k < e; ++k) {
-          if (row.data()[k] < 0 || row.data()[k] >= n) {
-            throw std::invalid_argument("group_rows: a row index is out of range");
-          }
-        }
-        nb::gil_scoped_release unlocked;
-        group_rows(n, row.data(), value.data(), e, offsets.data(), out.data());
-      },
-      "n"_a, "row"_a, "value"_a, "offsets"_a.noconvert(), "out"_a.noconvert(),
-      "Values grouped by row in compressed rows, each row's in input order.");
 }

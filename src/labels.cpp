@@ -66,15 +66,6 @@ struct NoInit : std::allocator<T> {
 template <class T>
 using Vec = std::vector<T, NoInit<T>>;
 
-// A numpy array that owns `v` (moved to the heap): (n,) or (n / cols, cols).
-template <class T, class A>
-nb::object give(std::vector<T, A> &&v, size_t cols = 0) {
-  auto *heap = new std::vector<T, A>(std::move(v));
-  nb::capsule owner(heap, [](void *p) noexcept { delete static_cast<std::vector<T, A> *>(p); });
-  const size_t shape[2] = {cols ? heap->size() / cols : heap->size(), cols};
-  return nb::cast(nb::ndarray<nb::numpy, T>(heap->data(), cols ? 2 : 1, shape, owner));
-}
-
 // Label values as int64 (float samples were checked to be whole numbers
 // within +-2^53 in Python, so the conversion is exact).
 template <class T>

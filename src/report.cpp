@@ -1,9 +1,8 @@
 // Kernels of the mesh report (isoconvert/report.py); see report.hpp.
 #include "report.hpp"
 
-#if defined(__SSE2__)
-#include <emmintrin.h>
-#endif
+#include "bind.hpp"
+#include "corners.hpp"
 
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
@@ -60,43 +59,6 @@ inline bool same_position(const double *xyz, i64 a, i64 b) {
   }
   return true;
 }
-
-inline i64 chunk_count(i64 n, i64 grain) { return (n + grain - 1) / grain; }
-
-// An uninitialized array (a std::vector would first write zeros over it, on
-// one thread: as long as the parallel pass that fills it). Memory comes from
-// malloc, in ordinary pages: where the kernel has to compact memory to find
-// huge pages, as on the development machine busy with other work, a first
-// write to 100 MB in huge pages took 0.1 to 0.2 s of system time, against
-// about 0.05 s in ordinary pages.
-template <class T>
-class Buffer {
- public:
-  // zeroed: from calloc, whose fresh pages are zero without a pass over them
-  explicit Buffer(i64 n, bool zeroed = false) : n_(std::max<i64>(n, 0)) {
-    const size_t bytes = std::max<size_t>(size_t(n_) * sizeof(T), 1);
-    p_ = static_cast<T *>(zeroed ? std::calloc(bytes, 1) : std::malloc(bytes));
-    if (!p_) throw std::bad_alloc();
-  }
-  ~Buffer() { std::free(p_); }
-  Buffer(const Buffer &) = delete;
-  Buffer &operator=(const Buffer &) = delete;
-  T *data() { return p_; }
-  const T *data() const { return p_; }
-  T &operator[](i64 i) { return p_[i]; }
-  const T &operator[](i64 i) const { return p_[i]; }
-  i64 size() const { return n_; }
-  // Hands the memory over (to be freed with std::free).
-  T *release() {
-    T *p = p_;
-    p_ = nullptr;
-    return p;
-  }
-
- private:
-  T *p_ = nullptr;
-  i64 n_ = 0;
-};
 
 // Per-chunk lists joined in chunk order: what parallel_for's chunks append
 // comes out in the order of a serial loop, whichever thread ran them.
@@ -395,73 +357,12 @@ double triangle_pass(const C *cells, i64 nt, const I *rep, const double *xyz, do
 
 namespace {
 
-template <class C>
-inline bool is_repeated(const C *c) {
-  return c[0] == c[1] || c[1] == c[2] || c[0] == c[2];
-}
-
-// A union-find shared by threads: every link goes from a larger root to a
-// smaller one (by compare-and-swap), so parent[x] <= x always holds, no
-// cycle can form, and each component ends up rooted at its smallest vertex
-// whatever the order of the unions. Path halving writes only ancestors.
-template <class I>
-struct SharedForest {
-  I *parent;
-
-  I find(I x) const {
-    for (;;) {
-      const I p = __atomic_load_n(parent + x, __ATOMIC_RELAXED);
-      if (p == x) return x;
-      const I g = __atomic_load_n(parent + p, __ATOMIC_RELAXED);
-      if (g != p) __atomic_store_n(parent + x, g, __ATOMIC_RELAXED);
-      x = g;
-    }
-  }
-
-  // Unites the trees of a and b; returns the root of the union (at the
-  // time). Passing a root as a (a vertex's last answer) saves a walk.
-  I join(I a, I b) const {
-    b = find(b);
-    for (;;) {
-      a = find(a);
-      if (a == b) return a;
-      if (a > b) std::swap(a, b);
-      I expected = b;
-      if (__atomic_compare_exchange_n(parent + b, &expected, a, false, __ATOMIC_RELAXED,
-                                      __ATOMIC_RELAXED)) {
-        return a;
-      }
-      b = find(b);
-    }
-  }
-};
-
 // What a chunk of vertices found, joined in chunk order afterwards.
 struct Found {
   std::vector<i64> boundary, non_manifold_edges, inconsistent, non_manifold_vertices, fans;
   std::vector<i64> dup_triangles, dup_sizes, all_edges, all_counts;
   i64 edges = 0, used = 0;
 };
-
-// Bit p of the result is set when a[p] == w, for p < 4 * groups (a padded).
-template <class I>
-inline unsigned matches(const I *a, I w, int groups) {
-  unsigned m = 0;
-  for (int p = 0; p < 4 * groups; ++p) m |= unsigned(a[p] == w) << p;
-  return m;
-}
-#if defined(__SSE2__)
-template <>
-inline unsigned matches<std::int32_t>(const std::int32_t *a, std::int32_t w, int groups) {
-  const __m128i x = _mm_set1_epi32(w);
-  unsigned m = 0;
-  for (int g = 0; g < groups; ++g) {
-    const __m128i y = _mm_load_si128(reinterpret_cast<const __m128i *>(a + 4 * g));
-    m |= unsigned(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(x, y)))) << (4 * g);
-  }
-  return m;
-}
-#endif
 
 // One use of an edge {v, w} at v.
 template <class I>
@@ -714,51 +615,9 @@ void topology(const C *tv, i64 nt, i64 nv, const u64 *key, int threads, bool all
   out = Topology();
   if (nv == 0) return;
 
-  // 1. corners by vertex (CSR: count, prefix sum, fill). The triangles are
-  // cut into a few parts, each counted by one thread into counters of its
-  // own (no atomics, one read of the cells per pass); within a vertex the
-  // parts' corners follow one another, so every vertex lists its corners in
-  // ascending order whatever the number of threads.
-  const i64 parts = std::max<i64>(1, std::min<i64>({i64(threads), i64(4), nt}));
-  auto first_triangle = [nt, parts](i64 p) { return nt * p / parts; };
-  Buffer<I> at(parts * nv, true);  // at[p * nv + v]: part p's corners at v, then where they go
-  parallel_for(parts, threads, 1, [&](int, i64 p0, i64 p1) {
-    for (i64 p = p0; p < p1; ++p) {
-      I *count = at.data() + p * nv;
-      for (i64 t = first_triangle(p); t < first_triangle(p + 1); ++t) {
-        const C *c = tv + 3 * t;
-        if (is_repeated(c)) continue;
-        ++count[c[0]];
-        ++count[c[1]];
-        ++count[c[2]];
-      }
-    }
-  });
-  Buffer<I> offset(nv + 1);  // v's corners are corner[offset[v]:offset[v + 1]]
-  {
-    i64 total = 0;
-    for (i64 v = 0; v < nv; ++v) {
-      offset[v] = static_cast<I>(total);
-      for (i64 p = 0; p < parts; ++p) {
-        const i64 n = at[p * nv + v];
-        at[p * nv + v] = static_cast<I>(total);
-        total += n;
-      }
-    }
-    offset[nv] = static_cast<I>(total);
-  }
-  Buffer<I> corner(offset[nv]);
-  parallel_for(parts, threads, 1, [&](int, i64 p0, i64 p1) {
-    for (i64 p = p0; p < p1; ++p) {
-      I *cursor = at.data() + p * nv;
-      for (i64 t = first_triangle(p); t < first_triangle(p + 1); ++t) {
-        const C *c = tv + 3 * t;
-        if (is_repeated(c)) continue;
-        for (int j = 0; j < 3; ++j) corner[cursor[c[j]]++] = static_cast<I>(3 * t + j);
-      }
-    }
-  });
-  std::free(at.release());
+  // 1. corners by vertex
+  Buffer<I> offset(nv + 1), corner(0);
+  corners_by_vertex(tv, nt, nv, threads, offset, corner);
   out.kept = corner.size() / 3;
 
   // 2. around each vertex; components by a shared union-find
@@ -953,6 +812,7 @@ using namespace nb::literals;
 using iso::i64;
 using iso::report::u64;
 using iso::report::u8;
+using iso::bind::give;
 
 namespace {
 
@@ -980,18 +840,9 @@ class Output {
   }
 
  private:
-  iso::report::Buffer<T> buffer_;
+  iso::Buffer<T> buffer_;
   i64 n_, cols_;
 };
-
-// A numpy array that owns `v` (moved to the heap): (n,) or (n / cols, cols).
-template <class T>
-nb::object give(std::vector<T> &&v, size_t cols = 0) {
-  auto *heap = new std::vector<T>(std::move(v));
-  nb::capsule owner(heap, [](void *p) noexcept { delete static_cast<std::vector<T> *>(p); });
-  const size_t shape[2] = {cols ? heap->size() / cols : heap->size(), cols};
-  return nb::cast(nb::ndarray<nb::numpy, T>(heap->data(), cols ? 2 : 1, shape, owner));
-}
 
 template <class I>
 void bind_index_type(nb::module_ &m, const char *suffix) {

@@ -111,14 +111,3 @@ def test_a_parallel_lid_is_certified_at_its_height_by_convexity():
     assert not failed.any() and abs(reach - 0.01) < 1e-12
     _, failed = within_bound(vertices.astype(float), lid, grid, below, 0.0099, corner)
     assert failed.all()
-
-
-def test_grouped_rows_are_a_stable_sort():
-    """The compressed rows behind the smoothing stencil: numpy's stable argsort's order."""
-    from isoconvert.graph import group_rows
-
-    rng = np.random.default_rng(2)
-    rows, values = rng.integers(0, 500, 20_000), rng.integers(0, 10**9, 20_000)
-    offsets, grouped = group_rows(600, rows, values)
-    assert (grouped == values[np.argsort(rows, kind="stable")]).all()
-    assert (np.diff(offsets) == np.bincount(rows, minlength=600)).all() and offsets[0] == 0

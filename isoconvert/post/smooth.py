@@ -1,8 +1,9 @@
 """Smoothing that keeps volume: windowed-sinc (default), Taubin lambda/mu, Laplacian.
 
 All three move each vertex by the umbrella operator ``L x_i = x_i - mean(x_j)``
-over its neighbours ``j`` (uniform weights), built once from the unique edges
-and applied with :func:`numpy.bincount`; they differ in the polynomial of ``L``
+over its neighbours ``j`` (uniform weights), whose stencil is built once from
+the triangles; every iteration is then one compiled pass that applies ``L`` and
+the method's update together (src/smooth.cpp). They differ in the polynomial of ``L``
 they apply (Taubin, Zhang and Golub, "Optimal surface smoothing as filter
 design", IBM RC-20404, 1996):
 
@@ -57,7 +58,7 @@ import numpy as np
 
 from ..errors import IsoconvertError
 from ..geometry import normalized_grid
-from ..graph import connected_components, group_rows, topology
+from ..graph import index_dtype
 from ..mesh import Mesh
 from ..threads import kernel_threads
 
@@ -80,6 +81,9 @@ _PLANE_TOLERANCE = 1e-9
 #: their size in 30 iterations), while balls of 78 vertices or more keep their
 #: volume within 3 %.
 MIN_COMPONENT_VERTICES = 64
+
+# bits of the stencil kernel's vertex codes (src/smooth.cpp)
+_PLANES, _FIXED, _CURVE = 7, 16, 32
 
 
 @dataclass(frozen=True)
@@ -200,7 +204,7 @@ def smooth_with(mesh: Mesh, options: SmoothOptions, grid: dict | None = None) ->
             f"{source}: smoothing needs triangles, got cells of shape {cells.shape} "
             "(2D contours are not smoothed)"
         )
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
     if len(vertices) == 0 or len(cells) == 0:
         raise IsoconvertError(f"{source}: the mesh is empty, there is nothing to smooth")
     if not np.isfinite(vertices).all():
@@ -221,39 +225,31 @@ def smooth_with(mesh: Mesh, options: SmoothOptions, grid: dict | None = None) ->
         return Mesh(vertices.copy(), mesh.cells, mesh.edge_ids, info)
 
     grid = grid if grid is not None else mesh.info.get("grid")
-    stencil = _Stencil(
-        vertices, cells.astype(np.int64, copy=False), grid, source, options.hold_below
-    )
+    stencil = _Stencil(vertices, cells, grid, source, options.hold_below)
 
     # filter on coordinates centred on the bounding box of the used vertices and
     # divided by its diagonal (VTK's NormalizeCoordinates): the sinc polynomial's
     # terms alternate in sign and grow with the iterations, which is better
     # conditioned on numbers of order 1 (VTK does the same)
-    used = vertices[stencil.used]
-    lo, hi = used.min(axis=0), used.max(axis=0)
-    center = 0.5 * (lo + hi)
-    length = float(np.linalg.norm(hi - lo)) or 1.0
-    # coordinates as rows (3, V): the per-axis gathers and sums run on contiguous memory
-    x = np.ascontiguousarray(((vertices - center) / length).T)
+    center = 0.5 * (stencil.lo + stencil.hi)
+    length = float(np.linalg.norm(stencil.hi - stencil.lo)) or 1.0
 
     if options.method == "sinc":
         c, converged = sinc_coefficients(options.iterations, options.passband)
-        x = _sinc(x, stencil, c)
+        out = stencil.sinc(vertices, c, center, length)
         record["converged"] = bool(converged)
-    elif options.method == "taubin":
-        for _ in range(options.iterations):
-            x = x - options.lam * stencil.laplacian(x)
-            x = x - options.taubin_mu * stencil.laplacian(x)
     else:
-        for _ in range(options.iterations):
-            x = x - options.lam * stencil.laplacian(x)
+        out = vertices.copy()
+        steps = [options.lam]
+        if options.method == "taubin":
+            steps.append(options.taubin_mu)
+        stencil.steps(out, steps * options.iterations, center, length)
 
-    out = np.ascontiguousarray(x.T * length + center)  # (V, 3) C order, as readers give
     stencil.restore(out, vertices)
     record.update(
-        fixed_vertices=int(stencil.fixed.sum()),
-        boundary_curve_vertices=int(stencil.curve.sum()),
-        grid_constrained_vertices=int(stencil.n_constrained),
+        fixed_vertices=int(np.count_nonzero(stencil.fixed)),
+        boundary_curve_vertices=int(np.count_nonzero(stencil.code & _CURVE)),
+        grid_constrained_vertices=len(stencil.constrained),
         held_small_components=stencil.n_small,
     )
     info["smoothing"] = record
@@ -320,134 +316,101 @@ def sinc_coefficients(iterations: int, passband: float) -> tuple[np.ndarray, boo
     return c / c.sum(), abs(float(c @ at_passband) - 1.0) < _GAIN_TOLERANCE
 
 
-def _sinc(x0: np.ndarray, stencil: _Stencil, c: np.ndarray) -> np.ndarray:
-    """``sum_i c_i T_i(I - L / 2) x0`` by the three-term Chebyshev recurrence.
-
-    Parameters
-    ----------
-    x0 : (3, V) float64
-    stencil : _Stencil
-    c : (N + 1,) float64
-
-    Returns
-    -------
-    (3, V) float64
-    """
-    from .. import _native
-
-    # T_0 x = x, T_1 x = x - L x / 2, T_{i+1} x = 2 (I - L / 2) T_i x - T_{i-1} x
-    x1 = x0 - 0.5 * stencil.laplacian(x0)
-    out = c[0] * x0 + c[1] * x1
-    for ci in c[2:]:
-        x2 = stencil.laplacian(x1)  # L x1, made x2 = 2 x1 - L x1 - x0 in one pass
-        _native.chebyshev_step(x0, x1, x2, float(ci), stencil.threads, out)
-        x0, x1 = x1, x2
-    return out
-
-
 class _Stencil:
-    """Which neighbours each vertex averages, and which directions it may move in.
+    """Which neighbours each vertex averages, and which directions it may move in:
+    the compiled ``SmoothingStencil`` (src/smooth.cpp), which the filters run on.
 
     Parameters
     ----------
     vertices : (V, 3) float64
-    cells : (C, 3) int64
+    cells : (C, 3) int
+        Checked to be in ``0..V-1``.
     grid : dict or None
     source : str
         For messages.
     hold_below : int
-        Components of fewer vertices are fixed.
+        Components of fewer used vertices are fixed.
+
+    Attributes
+    ----------
+    code : (V,) uint8
+        Bits 0-2: on a grid boundary plane of index axis 0, 1, 2; then used,
+        fixed, boundary curve and held small component (src/smooth.cpp).
+    fixed : (V,) bool
+    constrained : (K,) int64
+        Free vertices on a grid boundary plane, and ``mask`` (K, 3) bool its axes.
+    lo, hi : (3,) float64
+        The bounding box of the vertices in triangles.
+    n_small : int
+        Components held for their size.
     """
 
     def __init__(
         self, vertices: np.ndarray, cells: np.ndarray, grid, source: str, hold_below: int
     ) -> None:
-        n = len(vertices)
-        edges, counts, nonmanifold_vertices = _edges(cells, n)
-        a, b = edges[:, 0], edges[:, 1]
-        degree = np.bincount(a, minlength=n) + np.bincount(b, minlength=n)
-        boundary = counts == 1
-        n_boundary = np.bincount(a[boundary], minlength=n) + np.bincount(b[boundary], minlength=n)
-        many = counts > 2
-        on_many = (np.bincount(a[many], minlength=n) + np.bincount(b[many], minlength=n)) > 0
+        from .. import _native
 
-        fixed = (degree == 0) | on_many | ((n_boundary != 0) & (n_boundary != 2))
-        fixed[nonmanifold_vertices] = True
-        component = connected_components(n, a, b)
-        size = np.bincount(component, weights=degree > 0, minlength=n)
-        self.small = (size[component] < hold_below) & (degree > 0)
-        self.n_small = int(np.count_nonzero((size > 0) & (size < hold_below)))
-        fixed |= self.small
-        self.used = degree > 0
-        # open-boundary vertices average their two boundary neighbours only
-        self.curve = (n_boundary == 2) & ~fixed
-
-        self.planes = _grid_planes(vertices, grid, source)
-        if self.planes is not None:
-            mask = self.planes[0]
-            fixed |= mask.all(axis=1)
-        self.fixed = fixed
-
-        # directed stencil entries target <- neighbour: every edge of a simple
-        # vertex, only the boundary edges of a curve vertex, none of a fixed one
-        free = ~fixed & ~self.curve
-        take_ab = free[a] | (boundary & self.curve[a])
-        take_ba = free[b] | (boundary & self.curve[b])
-        target = np.concatenate([a[take_ab], b[take_ba]])
-        neighbour = np.concatenate([b[take_ab], a[take_ba]])
-        # in compressed rows for the compiled kernel: vertex i's neighbours are
-        # neighbours[offsets[i] : offsets[i + 1]]
-        self.offsets, self.neighbours = group_rows(n, target, neighbour)
-        counts = np.diff(self.offsets)
+        itype = index_dtype(len(vertices), 3 * len(cells))
         self.threads = kernel_threads()
-        count = counts.astype(np.float64)
-        self.still = np.flatnonzero(count == 0)
-        self.inverse_count = np.divide(1.0, count, out=np.zeros(n), where=count > 0)
-        self.n = n
-
-        if self.planes is not None:
-            mask, affine, inverse, aligned = self.planes
-            constrained = mask.any(axis=1) & ~fixed
-            self.constrained = np.flatnonzero(constrained)
-            self.mask = mask[self.constrained]
-            self.affine, self.inverse, self.aligned = affine, inverse, aligned
+        planes = _grid_planes(grid, source)
+        if planes is None:
+            packed, self.affine, self.inverse, self.aligned = (
+                np.zeros(0),
+                np.eye(3),
+                np.eye(3),
+                True,
+            )
         else:
-            self.constrained = np.zeros(0, np.int64)
-        self.n_constrained = len(self.constrained)
+            packed, self.affine, self.inverse, self.aligned = planes
+        build = getattr(_native, f"smoothing_stencil_{'int32' if itype == np.int32 else 'int64'}")
+        self.kernel = build(
+            np.ascontiguousarray(cells, dtype=itype).reshape(-1),
+            vertices,
+            packed,
+            self.affine,
+            self.aligned,
+            int(hold_below),
+            self.threads,
+        )
+        self.code = self.kernel.code
+        self.n_small = int(self.kernel.small_components)
+        lo, hi = self.kernel.bounds
+        self.lo, self.hi = np.array(lo), np.array(hi)
+        self.fixed = (self.code & _FIXED) != 0
+        self.constrained = np.flatnonzero(((self.code & _PLANES) != 0) & ~self.fixed)
+        bits = self.code[self.constrained, None] >> np.arange(3, dtype=np.uint8)
+        self.mask = (bits & 1).astype(bool)
 
-    def laplacian(self, x: np.ndarray) -> np.ndarray:
-        """``x_i - mean(x_j)`` over each vertex's stencil, zero for fixed vertices and
-        without its component along the grid axes a vertex is held on.
+    def rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """The neighbours each vertex averages: offsets (V + 1,) int64 and
+        neighbours (E,), vertex i's being ``neighbours[offsets[i] : offsets[i + 1]]``."""
+        return self.kernel.rows()
+
+    def sinc(self, x: np.ndarray, c: np.ndarray, center, length: float) -> np.ndarray:
+        """``sum_i c_i T_i(I - L / 2) x`` by the three-term Chebyshev recurrence, on
+        ``(x - center) / length``, scaled back.
 
         Parameters
         ----------
-        x : (3, V) float64
-            Coordinates as rows.
+        x : (V, 3) float64
+        c : (N + 1,) float64
+        center : (3,) float64
+        length : float
 
         Returns
         -------
-        (3, V) float64
+        (V, 3) float64
         """
-        from .. import _native
-
         out = np.empty_like(x)
-        _native.umbrella(self.offsets, self.neighbours, self.inverse_count, x, self.threads, out)
-        if len(self.still):
-            out[:, self.still] = 0.0
-        if self.n_constrained:
-            c = self.constrained
-            step = out[:, c].T  # (K, 3)
-            if self.aligned:
-                # index axes are world axes (scaled): zero those components
-                step[self.mask] = 0.0
-            else:
-                # remove the step's component along the constrained index axes
-                # (an oblique projection that keeps those index coordinates)
-                index_step = step @ self.inverse.T
-                index_step[self.mask] = 0.0
-                step = index_step @ self.affine.T
-            out[:, c] = step.T
+        self.kernel.sinc(
+            np.ascontiguousarray(c, np.float64), x, _frame(center), length, self.threads, out
+        )
         return out
+
+    def steps(self, x: np.ndarray, factors: list[float], center, length: float) -> None:
+        """``x -= f L x`` for each factor ``f`` in turn, on ``(x - center) / length``,
+        in place; x (V, 3) float64."""
+        self.kernel.steps(np.asarray(factors, np.float64), x, _frame(center), length, self.threads)
 
     def restore(self, out: np.ndarray, original: np.ndarray) -> None:
         """Put fixed vertices and constrained coordinates back exactly, in place.
@@ -462,9 +425,9 @@ class _Stencil:
         original : (V, 3) float64
         """
         out[self.fixed] = original[self.fixed]
-        if not self.n_constrained:
-            return
         c = self.constrained
+        if not len(c):
+            return
         if self.aligned:
             moved = out[c]
             moved[self.mask] = original[c][self.mask]
@@ -475,51 +438,23 @@ class _Stencil:
             out[c] -= index_step @ self.affine.T
 
 
-def _edges(cells: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unique edges, their triangle counts and the non-manifold vertices.
+def _frame(center) -> np.ndarray:
+    return np.ascontiguousarray(center, dtype=np.float64).reshape(3)
+
+
+def _grid_planes(grid, source: str):
+    """The grid boundary planes vertices are held on, for the stencil kernel.
 
     Parameters
     ----------
-    cells : (C, 3) int64
-    n : int
-        Number of vertices.
-
-    Returns
-    -------
-    edges : (E, 2) int64
-        Lower index first, ordered by the lower index.
-    counts : (E,) int64
-        Triangles using each edge.
-    nonmanifold : (K,) int64
-        Vertices whose triangles form more than one fan.
-
-    Notes
-    -----
-    One pass of the compiled topology kernel the mesh report uses (the one
-    behind :func:`isoconvert.graph.edge_table`), which also counts the fans
-    around every vertex. Triangles that repeat a vertex are skipped.
-    """
-    table = topology(cells, n)
-    return (
-        table["all_edges"].astype(np.int64, copy=False),
-        table["all_counts"].astype(np.int64, copy=False),
-        np.asarray(table["non_manifold_vertices"], dtype=np.int64),
-    )
-
-
-def _grid_planes(vertices: np.ndarray, grid, source: str):
-    """Which grid boundary planes each vertex lies on.
-
-    Parameters
-    ----------
-    vertices : (V, 3) float64
     grid : dict or None
 
     Returns
     -------
     None, or a tuple of
-        mask : (V, 3) bool, the vertex has index coordinate 0 or ``shape - 1``
-        along the axis (within 1e-9 of the grid's largest size);
+        packed : (16,) float64, the origin, the inverse affine (row-major), ``shape
+        - 1`` and the tolerance (1e-9 of the grid's largest size, in index units)
+        within which a vertex lies on a plane (index coordinate 0 or ``shape - 1``);
         affine : (3, 3) float64, index offsets to world offsets;
         inverse : (3, 3) float64;
         aligned : bool, the affine is diagonal (index axes are world axes).
@@ -533,11 +468,11 @@ def _grid_planes(vertices: np.ndarray, grid, source: str):
             "(shape, origin, invertible affine); pass a volume's grid to smooth it"
         )
     shape = np.asarray(clean["shape"], dtype=np.float64)
-    origin = np.asarray(clean["origin"], dtype=np.float64)
     affine = np.asarray(clean["affine"], dtype=np.float64)
     inverse = np.linalg.inv(affine)
-    index = (vertices - origin) @ inverse.T
     tolerance = _PLANE_TOLERANCE * max(float(shape.max()), 1.0)
-    mask = (np.abs(index) <= tolerance) | (np.abs(index - (shape - 1.0)) <= tolerance)
+    packed = np.concatenate(
+        [np.asarray(clean["origin"], np.float64), inverse.ravel(), shape - 1.0, [tolerance]]
+    )
     aligned = bool(np.count_nonzero(affine - np.diag(np.diag(affine))) == 0)
-    return mask, affine, inverse, aligned
+    return packed, affine, inverse, aligned
