@@ -28,6 +28,7 @@ void bind_normals(nb::module_ &m);        // normals.cpp
 void bind_distance(nb::module_ &m);       // distance.cpp
 void bind_rays(nb::module_ &m);           // rays.cpp
 void bind_graph(nb::module_ &m);          // graph.cpp
+void bind_precision(nb::module_ &m);      // precision.cpp
 
 namespace {
 
@@ -238,4 +239,5 @@ NB_MODULE(_native, m) {
   bind_distance(m);
   bind_rays(m);
   bind_graph(m);
+  bind_precision(m);
 }

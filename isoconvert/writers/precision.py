@@ -8,8 +8,8 @@ degenerate triangle (:mod:`isoconvert.geometry`: a repeated position, or flat).
 
 Speed: the shared predicate gathers every triangle's corners twice over and
 would cost seconds on millions of triangles. It is evaluated only on the few
-triangles whose verdict float32 rounding could change; a cheaper bound, applied
-block by block, proves the others safe (see :func:`_candidates`).
+triangles whose verdict float32 rounding could change; a cheaper bound, a
+compiled pass over the triangles, proves the others safe (see :func:`_candidates`).
 """
 
 from __future__ import annotations
@@ -19,15 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import flat_triangles, triangle_cross
-from ..graph import mix64, row_groups
+from ..graph import merge_positions
+from ..threads import kernel_threads
 
-#: Unit roundoff of float32: rounding moves a normal value by at most this, relatively.
-_U32 = 2.0**-24
-#: Absolute rounding error bound below float32's normal range (half the smallest subnormal is
-#: 2**-150; twice that for margin).
-_TINY32 = 2.0**-149
-_EPS64 = float(np.finfo(np.float64).eps)
-#: Triangles per block of the bound: small enough that the temporaries stay in cache.
+#: Candidate triangles per block of the exact test: small enough that the temporaries stay in cache.
 _BLOCK = 1 << 16
 
 
@@ -100,7 +95,8 @@ def float32_loss(
     if not (v32 != v64).any():  # already float32 values (or NaN, which rounding keeps)
         return Float32Loss()
     overflow = int((np.isfinite(v64).all(axis=1) & ~np.isfinite(v32).all(axis=1)).sum())
-    merged, group = _merges(v64, v32)
+    r32 = v32.astype(np.float64)
+    merged, group = _merges(v64, r32)
     if not count_degenerate and (merged or overflow):
         return Float32Loss(merged, None, overflow)
     if cells.shape[1] == 2:
@@ -109,7 +105,6 @@ def float32_loss(
             a, b = cells[:, 0], cells[:, 1]
             degenerate = int(((group[a] == group[b]) & (v64[a] != v64[b]).any(axis=1)).sum())
         return Float32Loss(merged, degenerate, overflow)
-    r32 = v32.astype(np.float64)
     candidates = _candidates(v64, cells, group)
     degenerate = 0
     for start in range(0, len(candidates), _BLOCK):
@@ -118,32 +113,25 @@ def float32_loss(
     return Float32Loss(merged, degenerate, overflow)
 
 
-def _merges(v64: np.ndarray, v32: np.ndarray) -> tuple[int, np.ndarray | None]:
+def _merges(v64: np.ndarray, r32: np.ndarray) -> tuple[int, np.ndarray | None]:
     """How many distinct float64 positions float32 merges, and (when it merges
-    any) the float32 position group of each vertex, (V,) int64."""
-    n = len(v64)
-    if n < 2:
+    any) the float32 position group of each vertex, (V,) int64: the distinct
+    positions counted by the report's compiled hash kernel
+    (:func:`isoconvert.graph.merge_positions`), -0.0 and 0.0 as one.
+
+    Parameters
+    ----------
+    v64 : (V, 3) float64
+    r32 : (V, 3) float64
+        ``v64`` rounded to float32.
+    """
+    if len(v64) < 2:
         return 0, None
-    bits = (v32 + np.float32(0.0)).view(np.uint32).astype(np.uint64)  # -0.0 -> 0.0
-    packed = np.column_stack([(bits[:, 0] << np.uint64(32)) | bits[:, 1], bits[:, 2]])
-    # fast answer for the usual case: no two float32 positions share even a hash
-    hashes = np.sort(mix64(packed[:, 0] ^ mix64(packed[:, 1])))
-    if not (hashes[1:] == hashes[:-1]).any():
+    rounded = merge_positions(r32, dtype=np.int64)
+    if rounded.unique == len(v64):  # the usual case: every float32 position distinct
         return 0, None
-    order, new = row_groups(packed)
-    starts = np.flatnonzero(new)
-    sizes = np.diff(np.append(starts, n))
-    if not (sizes > 1).any():
-        return 0, None
-    # only vertices sharing a float32 position can be distinct float64 positions that merge
-    members = order[np.repeat(sizes > 1, sizes)]
-    _, distinct = row_groups(v64[members] + 0.0)
-    merged = int(distinct.sum()) - int((sizes > 1).sum())
-    if merged == 0:
-        return 0, None
-    group = np.empty(n, dtype=np.int64)
-    group[order] = np.cumsum(new) - 1
-    return merged, group
+    merged = merge_positions(v64, dtype=np.int64).unique - rounded.unique
+    return (merged, rounded.rep) if merged else (0, None)
 
 
 def _degenerate(vertices: np.ndarray, cells: np.ndarray) -> np.ndarray:
@@ -171,28 +159,15 @@ def _candidates(v64: np.ndarray, cells: np.ndarray, group: np.ndarray | None) ->
     (:func:`~isoconvert.geometry.flat_triangles`), hence ``|cross64| <= 40 eps
     (m + s)(l + 4 s) + 8 l s + 16 s**2``; twice that, with 64 for 40, is the
     bound used. A repeated float32 position needs two corners in one float32
-    position group (``group``).
+    position group (``group``). Evaluated per triangle by the compiled
+    ``float32_candidates`` (src/precision.cpp), in this arithmetic and order.
     """
-    vx, vy, vz = (np.ascontiguousarray(v64[:, k]) for k in range(3))
-    vmax = np.abs(v64).max(axis=1)
-    keep = [np.zeros(0, dtype=np.int64)]
-    for start in range(0, len(cells), _BLOCK):
-        c = cells[start : start + _BLOCK]
-        i0, i1, i2 = c[:, 0], c[:, 1], c[:, 2]
-        x0, y0, z0 = vx[i0], vy[i0], vz[i0]
-        ax, ay, az = vx[i1] - x0, vy[i1] - y0, vz[i1] - z0
-        bx, by, bz = vx[i2] - x0, vy[i2] - y0, vz[i2] - z0
-        cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-        cross2 = cx * cx + cy * cy + cz * cz
-        longer = np.maximum(ax * ax + ay * ay + az * az, bx * bx + by * by + bz * bz)
-        longest = 2.0 * np.sqrt(longer)
-        m = np.maximum(np.maximum(vmax[i0], vmax[i1]), vmax[i2])
-        s = _U32 * m + _TINY32
-        rounding = 64.0 * _EPS64 * (m + s) * (longest + 4.0 * s)
-        bound = 2.0 * (rounding + 8.0 * longest * s + 16.0 * s * s)
-        near = cross2 <= bound * bound
-        if group is not None:
-            g0, g1, g2 = group[i0], group[i1], group[i2]
-            near |= (g0 == g1) | (g1 == g2) | (g0 == g2)
-        keep.append(np.flatnonzero(near) + start)
-    return np.concatenate(keep)
+    from .. import _native
+
+    none = np.zeros(0, dtype=np.int64)
+    return _native.float32_candidates(
+        np.ascontiguousarray(v64),
+        np.ascontiguousarray(cells, dtype=np.int64),
+        none if group is None else np.ascontiguousarray(group, dtype=np.int64),
+        kernel_threads(),
+    )
