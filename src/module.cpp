@@ -29,6 +29,7 @@ void bind_distance(nb::module_ &m);       // distance.cpp
 void bind_rays(nb::module_ &m);           // rays.cpp
 void bind_graph(nb::module_ &m);          // graph.cpp
 void bind_precision(nb::module_ &m);      // precision.cpp
+void bind_cap(nb::module_ &m);            // cap.cpp
 
 namespace {
 
@@ -240,4 +241,5 @@ NB_MODULE(_native, m) {
   bind_rays(m);
   bind_graph(m);
   bind_precision(m);
+  bind_cap(m);
 }

@@ -15,6 +15,9 @@ Triangulating those polygons gives a cap that meets the surface at its own
 vertices (found by grid edge id, no welding), lies exactly in the faces, and
 shares its vertices at positive samples between faces that meet at a grid edge:
 the closed surface bounds exactly the part of the object inside the grid.
+
+The tables are derived here; the per-cell work (cases, the decider, looking up
+the surface's vertices by edge id) is the compiled ``grid_cap`` (src/cap.cpp).
 """
 
 from __future__ import annotations
@@ -24,17 +27,14 @@ import numpy as np
 from ..errors import IsoconvertError
 from ..extract.placement import reversed_orientation
 from ..extract.tables import DEFAULT_AMBIGUITY
-from ..extract.trilinear import asymptotic_joins_positive
 from ..mesh import Mesh
 from ..methods import TRILINEAR
+from ..threads import kernel_threads
 from ..volume import Volume, slabs
 
-# Corners of a face cell in cyclic order in its (p, q) plane, and the four cell
-# edges: edge c runs from corner c to corner c + 1 (mod 4). Edge 0 and 2 lie
-# along p, 1 and 3 along q; (dp, dq) is the lower end of each.
-_CORNERS = ((0, 0), (1, 0), (1, 1), (0, 1))
-_EDGE_LOW = ((0, 0), (1, 0), (0, 1), (0, 0))
-_EDGE_AXIS = (0, 1, 0, 1)  # 0: along p, 1: along q
+# A face cell's corners 0-3 run cyclically in its (p, q) plane, (0, 0), (1, 0),
+# (1, 1), (0, 1); edge c runs from corner c to corner c + 1 (mod 4), so edges 0
+# and 2 lie along p, 1 and 3 along q (src/cap.cpp builds the cells from them).
 
 
 def _cell_triangles(case: int, rule: str) -> list[tuple[int, int, int]]:
@@ -151,91 +151,62 @@ def close_at_grid(
         raise IsoconvertError(
             "--close needs the surface as extracted (with its grid edge ids), by --method cubes"
         )
+    from .. import _native
+
     shape = np.asarray(volume.shape, dtype=np.int64)
-    stride = np.array([1, shape[0], shape[0] * shape[1]], dtype=np.int64)
     outward_flip = reversed_orientation(volume, flip)
     decided = ambiguity == TRILINEAR  # each ambiguous cell by its own decider
     fixed = DEFAULT_AMBIGUITY if decided else ambiguity
-    tables = [np.array(_cell_triangles(case, fixed), dtype=np.int64) for case in range(16)]
-    joined = [
-        np.array(_cell_triangles(case, "separate-negative"), dtype=np.int64) for case in (5, 10)
-    ]
-    keys = []  # (T, 3) int64: edge ids (>= 0) or -1 - sample index (< 0)
+    tables = np.array([_table_row(_cell_triangles(case, fixed)) for case in range(16)])
+    joined = np.array([_table_row(_cell_triangles(case, "separate-negative")) for case in (5, 10)])
+    faces, images, start = [], [], 0
     for axis, side, image in _face_images(volume):
         p_axis, q_axis = [a for a in range(3) if a != axis]
-        values = np.asarray(image, dtype=np.float64)
+        values = np.asarray(image, dtype=np.float64).ravel()
         if nan_as is not None:
             values = np.where(np.isfinite(values), values, nan_as)
-        positive = values >= level
-        if not positive.any():
-            continue
-        bits = positive.astype(np.int64)
-        case = bits[:-1, :-1] | bits[1:, :-1] << 1 | bits[1:, 1:] << 2 | bits[:-1, 1:] << 3
         # the cap's normals point out of the grid: -axis on side 0, +axis on the far side
         p_cross_q = 1 if (p_axis, q_axis) in ((1, 2), (0, 1)) else -1
         reverse = (p_cross_q * (1 if side else -1) < 0) != outward_flip
-        groups = []
-        for c in range(1, 16):
-            p, q = np.nonzero(case == c)
-            if decided and c in (5, 10) and len(p):
-                # corners (00, 10, 01, 11) in (p, q), as the cubes read a face
-                f00, f10 = values[p, q], values[p + 1, q]
-                f01, f11 = values[p, q + 1], values[p + 1, q + 1]
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    joins = asymptotic_joins_positive(f00, f10, f01, f11, level)
-                groups.append((joined[c == 10], p[joins], q[joins]))
-                p, q = p[~joins], q[~joins]
-            groups.append((tables[c], p, q))
-        for table, p, q in groups:
-            if not len(table) or not len(p):
-                continue
-            base = side * stride[axis] + p * stride[p_axis] + q * stride[q_axis]
-            slot_keys = np.empty((len(p), 8), dtype=np.int64)
-            for corner, (dp, dq) in enumerate(_CORNERS):
-                slot_keys[:, corner] = -1 - (base + dp * stride[p_axis] + dq * stride[q_axis])
-            for edge, ((dp, dq), along) in enumerate(zip(_EDGE_LOW, _EDGE_AXIS, strict=True)):
-                low = base + dp * stride[p_axis] + dq * stride[q_axis]
-                slot_keys[:, 4 + edge] = 3 * low + (q_axis if along else p_axis)
-            triangles = slot_keys[:, table].reshape(-1, 3)
-            keys.append(triangles[:, ::-1] if reverse else triangles)
-    if not keys:
+        faces.append([axis, side, image.shape[0], image.shape[1], int(reverse), start])
+        images.append(values)
+        start += len(values)
+    cap, samples, missing = _native.grid_cap(
+        np.concatenate(images),
+        np.array(faces, dtype=np.int64),
+        shape,
+        float(level),
+        tables,
+        joined,
+        decided,
+        np.ascontiguousarray(mesh.edge_ids, dtype=np.int64),
+        kernel_threads(),
+    )
+    if missing:
+        raise IsoconvertError(
+            "--close: the surface does not cross the grid's faces where the volume says it "
+            "should; it must be the cubes surface of this volume at this level"
+        )
+    if not len(cap):
         return mesh
-    keys = np.concatenate(keys)
-    cap, vertices, ids = _resolve(mesh, keys, shape, volume)
+    i = samples % shape[0]
+    j = samples // shape[0] % shape[1]
+    k = samples // (shape[0] * shape[1])
+    vertices = volume.index_to_world(np.column_stack([i, j, k]).astype(np.float64))
     info = dict(mesh.info)
     info["closed"] = {"cap_triangles": len(cap), "cap_vertices": len(vertices)}
     return Mesh(
         np.concatenate([np.asarray(mesh.vertices), vertices]),
         np.concatenate([np.asarray(mesh.cells), cap]),
-        np.concatenate([np.asarray(mesh.edge_ids), ids]),
+        np.concatenate([np.asarray(mesh.edge_ids), -1 - samples]),
         info,
     )
 
 
-def _resolve(
-    mesh: Mesh, keys: np.ndarray, shape: np.ndarray, volume: Volume
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The cap's triangles as vertex indices, its new vertices and their ids."""
-    flat = keys.ravel()
-    on_edges = flat >= 0
-    order = np.argsort(mesh.edge_ids, kind="stable")
-    sorted_ids = np.asarray(mesh.edge_ids)[order]
-    where = np.searchsorted(sorted_ids, flat[on_edges])
-    where = np.minimum(where, len(sorted_ids) - 1)
-    if not len(sorted_ids) or not np.array_equal(sorted_ids[where], flat[on_edges]):
-        raise IsoconvertError(
-            "--close: the surface does not cross the grid's faces where the volume says it "
-            "should; it must be the cubes surface of this volume at this level"
-        )
-    index = np.empty(len(flat), dtype=np.int64)
-    index[on_edges] = order[where]
-    samples, rank = np.unique(-1 - flat[~on_edges], return_inverse=True)
-    index[~on_edges] = len(mesh.vertices) + rank
-    i = samples % shape[0]
-    j = samples // shape[0] % shape[1]
-    k = samples // (shape[0] * shape[1])
-    vertices = volume.index_to_world(np.column_stack([i, j, k]).astype(np.float64))
-    return index.reshape(-1, 3), vertices, -1 - samples
+def _table_row(triangles: list[tuple[int, int, int]]) -> list[int]:
+    """A case's triangles for the kernel: their number, then 4 x 3 slots (-1 unused)."""
+    slots = [s for t in triangles for s in t]
+    return [len(triangles)] + slots + [-1] * (12 - len(slots))
 
 
 __all__ = ["close_at_grid"]
