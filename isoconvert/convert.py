@@ -12,7 +12,7 @@ import numpy as np
 
 from .atomic import check_output, output_stream, refuse_inputs, refuse_shared, refuse_stream
 from .attributes import check_3d, vertex_normals, vertex_values
-from .errors import IsoconvertError, OutputError
+from .errors import FormatError, IsoconvertError, OutputError
 from .extract import default_method, extract
 from .extract.blocks import Blocks
 from .extract.tables import DEFAULT_AMBIGUITY
@@ -91,6 +91,8 @@ class ConvertOptions:
         Labels: the value of no label.
     label_smoothing : int or None
         Labels: Surface Nets relaxation iterations (None: 16; 0: the voxel faces).
+    lods : int
+        Levels of detail of a precomputed layer (1: the meshes as extracted).
     """
 
     read: ReadOptions = field(default_factory=ReadOptions)
@@ -116,6 +118,7 @@ class ConvertOptions:
     single_file: bool = False
     background: int = 0
     label_smoothing: int | None = None
+    lods: int = 3
 
     def updated(self, **changes) -> ConvertOptions:
         """A copy with ``changes``; names of :class:`ReadOptions` fields go to
@@ -258,6 +261,10 @@ def convert_levels(
     """
     opts = (options or ConvertOptions()).updated(**changes)
     progress = on_progress or (lambda stage: None)
+    if opts.format and WRITERS.get(opts.format).layer:
+        from .writers.precomputed import LAYER_ONLY
+
+        raise FormatError(LAYER_ONLY)
     outputs = level_outputs(output, levels)
     for path in outputs:  # first: a folder given as -o is "a folder", not a format
         check_output(path, opts.force)

@@ -16,6 +16,7 @@ from .grid import grid_slab_zyx
 from .post.pipeline import EmptyMeshError, post_process
 from .volume import Volume
 from .writers import check_attributes, output_format
+from .writers.precomputed import check_layer, data_type_for, write_precomputed
 from .writers.stored import write_mesh
 
 
@@ -77,7 +78,13 @@ def convert_labels(
             "neither: leave them out with --labels"
         )
     post = replace(opts.post, close=False, smooth=0)  # label surfaces are closed and smoothed
-    if opts.single_file:
+    if writer.layer:
+        if opts.single_file:
+            raise IsoconvertError(
+                f"{writer.name} is a layer of every label already; leave out --single-file"
+            )
+        check_layer(output, opts.force, opts.lods, [input])
+    elif opts.single_file:
         check_output(output, opts.force)
         check_attributes(writer, output, labels=True)
         if post.steps:
@@ -88,7 +95,7 @@ def convert_labels(
     elif opts.labels:
         for path in label_outputs(output, opts.labels):
             check_output(path, opts.force)
-    known = [output] if opts.single_file else label_outputs(output, opts.labels)
+    known = [output] if opts.single_file or writer.layer else label_outputs(output, opts.labels)
     refuse_shared([*known, *also_writes])
     for path in [*known, *also_writes]:  # the input itself, before its header is read
         refuse_inputs(path, [input] if Path(input).is_file() else [])
@@ -111,9 +118,16 @@ def convert_labels(
         progress("writing")
         path = write_mesh(mesh, output, format=writer.name, ascii=opts.ascii, force=opts.force)
         return [ConvertResult(volume, mesh, path, writer.name, opts.ascii)]
-    outputs = label_outputs(output, surfaces.labels)
-    for path in outputs:  # every name is checked before the first file is written
-        check_output(path, opts.force, inputs=volume.files)
+    outputs = (
+        [Path(output) / "mesh" / str(label) for label in surfaces.labels]
+        if writer.layer
+        else label_outputs(output, surfaces.labels)
+    )
+    if writer.layer:
+        check_layer(output, opts.force, opts.lods, volume.files)
+    else:
+        for path in outputs:  # every name is checked before the first file is written
+            check_output(path, opts.force, inputs=volume.files)
     meshes = [surfaces[label] for label in surfaces.labels]
     if post.steps:
         progress("post-processing")
@@ -126,8 +140,30 @@ def convert_labels(
             except EmptyMeshError as exc:  # say which label's surface it was
                 text = str(exc).removeprefix(f"{volume.source}: ")
                 raise EmptyMeshError(f"{volume.source}: label {label}: {text}") from None
+    if writer.layer:
+        progress("writing")
+        grid = surfaces.combined.info["grid"]
+        write_precomputed(
+            output,
+            dict(zip(surfaces.labels, meshes, strict=True)),
+            grid,
+            unit=volume.unit,
+            data_type=data_type_for(max(surfaces.labels)),
+            lods=opts.lods,
+            decimate=_bounded,
+            force=opts.force,
+            on_status=on_status,
+        )
     results = []
     for label, path, mesh in zip(surfaces.labels, outputs, meshes, strict=True):
+        extracted = surfaces[label]
+        if writer.layer:  # each label's mesh is the layer's object of that id
+            results.append(
+                ConvertResult(
+                    volume, mesh, path, writer.name, False, extracted if post.steps else None
+                )
+            )
+            continue
         extracted = surfaces[label]
         progress("writing")
         written = write_mesh(mesh, path, format=writer.name, ascii=opts.ascii, force=opts.force)
@@ -137,6 +173,13 @@ def convert_labels(
             )  # fmt: skip
         )
     return results
+
+
+def _bounded(mesh, bound: float):
+    """A precomputed layer's coarser level: the bounded collapse to within ``bound``."""
+    from .post.decimate import decimate
+
+    return decimate(mesh, max_error=bound)
 
 
 #: Of the face-neighbouring sample pairs inside labels (neither background), the

@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from ..atomic import check_output
-from ..errors import IsoconvertError, VolumeError
+from ..errors import FormatError, IsoconvertError, VolumeError
 from ..writers import WRITERS, check_attributes
 from .display import _batch_display, _print_batch_table, _quiet_third_party
 from .options import (
@@ -87,6 +87,11 @@ def batch(
 
     required = parse_requirements(require)
     writer = WRITERS.get(mesh.format or "ply")
+    if writer.layer:
+        raise FormatError(
+            f"batch writes a mesh file per volume; {writer.name} layers come from "
+            "convert --labels, one per label volume"
+        )
     check_attributes(writer, "--format", normals=mesh.normals, labels=labels.single_file)
     # the raw layout goes to raw files only (plan); every other option to every file
     options = _convert_options(

@@ -19,6 +19,7 @@ from .options import (
     ForceOpt,
     LabelArgs,
     LevelOpt,
+    LodsOpt,
     MemoryArgs,
     MeshArgs,
     PostArgs,
@@ -72,6 +73,7 @@ def convert(
     post: PostArgs = PostArgs(),
     memory: MemoryArgs = MemoryArgs(),
     labels: LabelArgs = LabelArgs(),
+    lods: LodsOpt = 3,
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
     _quiet_third_party()
@@ -91,6 +93,7 @@ def convert(
         force=force,
         values=values,
         blocks=memory.blocks(),
+        lods=lods,
     )
     by_label = options.labels is not None
     if not by_label and not level:

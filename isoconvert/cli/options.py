@@ -512,6 +512,17 @@ def _grouped(*omit: str):
     return decorate
 
 
+#: convert's levels of detail of --format precomputed (batch writes no layers)
+LodsOpt = Annotated[
+    int,
+    typer.Option(
+        help="Levels of detail of --format precomputed: 1 is the mesh as extracted, "
+        "level k decimated to within 2^(k-1) voxels (needs isoconvert\\[simplify]).",
+        rich_help_panel="Output",
+    ),
+]
+
+
 def _convert_options(
     read: ReadArgs,
     extract: ExtractArgs,

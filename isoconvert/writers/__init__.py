@@ -64,6 +64,9 @@ class Writer:
     #: whether its reader gives back the extraction rule (``mesh.info["ambiguity"]``,
     #: an ``ambiguity R`` header comment) for the report
     records_extraction: bool = False
+    #: whether it writes a folder holding every object of a run (a Neuroglancer
+    #: layer: ``convert --labels``) instead of one mesh file
+    layer: bool = False
 
 
 WRITERS: Registry[Writer] = Registry("output format")
@@ -258,6 +261,19 @@ for _writer in (
         False,
         _TRIANGLES,
         records_source=False,
+    ),
+    # a folder, written by isoconvert.writers.precomputed.write_precomputed
+    Writer(
+        "precomputed",
+        "Neuroglancer precomputed segmentation layer, a folder: every label's mesh at --lods "
+        "levels of detail, Draco-encoded (convert --labels; needs isoconvert[precomputed])",
+        (),
+        LazyFunction("isoconvert.writers.precomputed:not_a_file"),
+        False,
+        _TRIANGLES,
+        precision="float64",
+        records_source=False,
+        layer=True,
     ),
 ):
     WRITERS.register(_writer.name, _writer)

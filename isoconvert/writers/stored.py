@@ -46,6 +46,14 @@ def _check_cells(writer: Writer, mesh: Mesh, name: str | Path) -> None:
     )
 
 
+def _refuse_layer(writer: Writer) -> None:
+    """A layer format is a folder of every object, written by its own function."""
+    if writer.layer:
+        from .precomputed import LAYER_ONLY
+
+        raise FormatError(LAYER_ONLY)
+
+
 def _stored(
     writer: Writer, mesh: Mesh, on_status: Callable[[str], None] | None, expand: bool = True
 ) -> Mesh:
@@ -187,6 +195,7 @@ def stored_mesh(
         Unknown format, or cells it cannot hold.
     """
     writer = WRITERS.get(format)
+    _refuse_layer(writer)
     _check_cells(writer, mesh, writer.name)
     return _stored(writer, mesh, on_status)
 
@@ -228,6 +237,7 @@ def write_mesh(
     Path
     """
     writer = output_format(path, format)
+    _refuse_layer(writer)
     _check_cells(writer, mesh, path)
     if not writer.streams and getattr(mesh, "slab_starts", None) is not None:
         # a block-wise mesh that outgrew memory (extract.blocks.BlockMesh) lives in

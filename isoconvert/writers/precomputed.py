@@ -1,0 +1,375 @@
+"""Neuroglancer precomputed segmentation layers with multi-resolution meshes.
+
+A layer is a folder (Neuroglancer's "precomputed" format, served as static
+files):
+
+``info``
+    The segmentation volume's metadata: ``type`` segmentation, the label
+    ``data_type``, one scale with the volume's ``size``, its ``resolution`` in
+    nanometres (the spacing and the volume's unit) and ``voxel_offset`` 0, and
+    ``mesh``: the name of the mesh folder.
+``mesh/info``
+    ``@type`` ``neuroglancer_multilod_draco``, the ``vertex_quantization_bits``
+    (10 or 16), the ``transform`` from the stored model space (here the volume's
+    index space: sample (i, j, k) at (i, j, k)) to nanometres (the volume's
+    index-to-world affine, origin and rotation included, times nanometres per
+    unit), and ``lod_scale_multiplier`` 1.
+``mesh/<id>.index``, ``mesh/<id>``
+    Per object, the manifest (octree chunk shape, grid origin, the levels of
+    detail with their scales, the fragments' positions and byte sizes) and the
+    fragments: Draco meshes whose integer positions are the vertices quantized
+    in their fragment's box.
+
+Levels of detail: level 0 is the mesh as extracted; level k (k >= 1) is it
+decimated, by the function the caller passes (the jobs pass isoconvert's bounded
+collapse, :func:`isoconvert.post.decimate.decimate`), to within ``2**(k - 1)``
+index units both ways. Each level is one fragment whose
+octree node starts at the object's bounding box: its node at level k is ``2**k``
+boxes wide, so the object lies in the node's first octant and no triangle
+crosses the node's 2x2x2 partition, as the format asks. Quantizing in that box
+moves a vertex by at most half a step: ``box * 2**k / (2**bits - 1) / 2``
+per axis.
+
+Not built yet (issue 25): octree nodes smaller than the object (fragments that
+stream parts of large objects), sharding, the legacy single-resolution format,
+block-wise and Dask writing, and the labels' own chunks (``--with-volume``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FormatError, IsoconvertError, OutputError
+from ..geometry import normalized_grid
+from ..mesh import Mesh
+from ..units import meters_per_unit
+
+#: The vertex quantization the format allows.
+QUANTIZATION_BITS = (10, 16)
+
+#: Label types a precomputed segmentation may hold.
+_DATA_TYPES = ("uint8", "uint16", "uint32", "uint64")
+
+
+def not_a_file(mesh: Mesh, fh, ascii: bool) -> None:
+    """The registry's writer entry: a layer is a folder of every object, not a stream."""
+    raise FormatError(LAYER_ONLY)
+
+
+#: Where the precomputed format goes.
+LAYER_ONLY = (
+    "precomputed writes a folder holding every label's mesh: use it with "
+    "convert --labels -o FOLDER --format precomputed"
+)
+
+
+def data_type_for(largest: int) -> str:
+    """The smallest unsigned type of a precomputed segmentation holding ``largest``."""
+    for name in _DATA_TYPES:
+        if largest <= np.iinfo(name).max:
+            return name
+    raise IsoconvertError(f"precomputed: label {largest} does not fit in uint64")
+
+
+def check_layer(
+    folder: str | Path, force: bool, lods: int, inputs: Sequence[str | Path] = ()
+) -> None:
+    """Fail before any work when a layer cannot be written: DracoPy or (for more
+    than one level of detail) meshoptimizer missing, or the folder taken.
+
+    Raises
+    ------
+    IsoconvertError
+        A missing package or bad ``lods``.
+    OutputError
+        ``folder`` exists (without ``force``), is not a folder, its parent is
+        missing, or it holds one of ``inputs`` (replacing it would delete them).
+    """
+    _dracopy()
+    _check_lods(lods)
+    if lods > 1:
+        try:
+            import meshoptimizer  # noqa: F401
+        except ImportError:
+            raise IsoconvertError(
+                '--lods above 1 decimates: pip install "isoconvert[simplify]", or --lods 1'
+            ) from None
+    folder = Path(folder)
+    parent = folder.parent if str(folder.parent) else Path(".")
+    if not parent.is_dir():
+        raise OutputError(f"{parent} is not a folder; create it first")
+    if folder.exists() and not folder.is_dir():
+        raise OutputError(f"{folder} exists and is not a layer folder; give a folder name")
+    if folder.exists() and not force:
+        raise OutputError(f"{folder} exists; pass --force to replace it")
+    if folder.is_dir():
+        inside = folder.resolve()
+        for path in inputs:
+            resolved = Path(path).resolve()
+            if resolved == inside or inside in resolved.parents:
+                raise OutputError(
+                    f"{folder} holds the input {path}; replacing the layer would delete it: "
+                    "write the layer elsewhere"
+                )
+
+
+def _check_lods(lods) -> None:
+    if isinstance(lods, bool) or not isinstance(lods, int | np.integer) or lods < 1:
+        raise IsoconvertError(f"precomputed: levels of detail must be 1 or more, got {lods!r}")
+
+
+def layer_transform(grid: dict, unit: str | None) -> tuple[np.ndarray, float]:
+    """The stored-model-to-nanometre transform of a volume's index space.
+
+    Parameters
+    ----------
+    grid : dict
+        ``shape``, ``origin``, ``affine`` (index offsets to world offsets).
+    unit : str or None
+        The volume's length unit; None or an unknown name counts as nanometres.
+
+    Returns
+    -------
+    transform : (3, 4) float64
+        ``[A | o]`` in nanometres: world = A @ index + o.
+    nm_per_unit : float
+    """
+    per = meters_per_unit(unit)
+    nm = 1.0 if per is None else per * 1e9
+    affine = np.asarray(grid["affine"], dtype=np.float64) * nm
+    origin = np.asarray(grid["origin"], dtype=np.float64) * nm
+    return np.column_stack([affine, origin]), nm
+
+
+def write_precomputed(
+    folder: str | Path,
+    meshes: Mapping[int, Mesh],
+    grid: dict,
+    *,
+    unit: str | None = None,
+    data_type: str = "uint64",
+    lods: int = 1,
+    decimate: Callable[[Mesh, float], Mesh] | None = None,
+    bits: int = 16,
+    force: bool = False,
+    on_status: Callable[[str], None] | None = None,
+) -> Path:
+    """Write meshes as one Neuroglancer precomputed segmentation layer.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The layer's folder; it appears whole or not at all (built beside it and
+        renamed into place).
+    meshes : mapping of int to Mesh
+        Each object's surface, keyed by its segment id (> 0): ``vertices (V, 3)``
+        in the world frame of ``grid``, ``cells (C, 3)``.
+    grid : dict
+        The volume's grid (``shape``, ``origin``, ``affine``).
+    unit : str or None
+        The volume's length unit (nanometres when None or unknown).
+    data_type : str
+        The labels' type, one of uint8, uint16, uint32, uint64.
+    lods : int
+        Levels of detail, 1 or more.
+    decimate : callable or None
+        ``decimate(mesh, bound)``: the mesh (in index coordinates) with fewer
+        triangles, within ``bound`` of it both ways (the post-processing layer's
+        bounded collapse, :func:`isoconvert.post.decimate.decimate` with
+        ``max_error``); needed for more than one level.
+    bits : int
+        Vertex quantization bits, 10 or 16.
+    force : bool
+        Replace an existing folder.
+    on_status : callable or None
+        Receives notes.
+
+    Returns
+    -------
+    Path
+        The folder.
+
+    Raises
+    ------
+    IsoconvertError
+        A bad option or mesh, DracoPy or meshoptimizer missing.
+    OutputError
+        The folder exists (without ``force``) or cannot be written.
+    """
+    draco = _dracopy()
+    if bits not in QUANTIZATION_BITS:
+        raise IsoconvertError(f"precomputed: quantization bits must be 10 or 16, got {bits}")
+    _check_lods(lods)
+    if lods > 1 and decimate is None:
+        raise IsoconvertError("precomputed: levels of detail above 0 need a decimate function")
+    if data_type not in _DATA_TYPES:
+        raise IsoconvertError(
+            f"precomputed: labels of type {data_type} cannot be a segmentation; "
+            f"one of {', '.join(_DATA_TYPES)}"
+        )
+    clean = normalized_grid(grid)
+    if clean is None or len(clean["shape"]) != 3:
+        raise IsoconvertError("precomputed: needs the 3D grid the meshes were extracted on")
+    for segment in meshes:
+        if isinstance(segment, bool) or not isinstance(segment, int | np.integer) or segment < 1:
+            raise IsoconvertError(f"precomputed: segment ids must be integers > 0, got {segment!r}")
+    folder = Path(folder)
+    if folder.exists() and not force:
+        raise OutputError(f"{folder} exists; pass --force to replace it")
+    transform, nm = layer_transform(clean, unit)
+    if meters_per_unit(unit) is None and on_status:
+        on_status("note: the volume's unit is unknown; the layer takes one unit as 1 nm")
+    inverse = np.linalg.inv(np.asarray(clean["affine"], dtype=np.float64))
+    origin = np.asarray(clean["origin"], dtype=np.float64)
+
+    parent = folder.parent if str(folder.parent) else Path(".")
+    work = Path(tempfile.mkdtemp(prefix=f".{folder.name}.part-", dir=parent))
+    try:
+        work.chmod(0o777 & ~_umask())  # mkdtemp's 0700 would hide the layer from a server
+        (work / "mesh").mkdir()
+        _write_json(work / "info", _layer_info(clean, nm, data_type))
+        _write_json(
+            work / "mesh" / "info",
+            {
+                "@type": "neuroglancer_multilod_draco",
+                "vertex_quantization_bits": bits,
+                "transform": [float(x) for x in transform.ravel()],
+                "lod_scale_multiplier": 1.0,
+            },
+        )
+        for segment, mesh in meshes.items():
+            _check_mesh(int(segment), mesh)
+            index = (np.asarray(mesh.vertices, dtype=np.float64) - origin) @ inverse.T
+            full = Mesh(index, np.asarray(mesh.cells, dtype=np.int64))
+            levels = [full] + [decimate(full, float(2 ** (k - 1))) for k in range(1, lods)]
+            manifest, data = _object(levels, bits, draco)
+            (work / "mesh" / f"{int(segment)}.index").write_bytes(manifest)
+            (work / "mesh" / f"{int(segment)}").write_bytes(data)
+        _replace(work, folder)
+    except BaseException:
+        shutil.rmtree(work, ignore_errors=True)
+        raise
+    return folder
+
+
+def _check_mesh(segment: int, mesh: Mesh) -> None:
+    cells = np.asarray(mesh.cells)
+    vertices = np.asarray(mesh.vertices)
+    if cells.ndim != 2 or cells.shape[1] != 3 or not len(cells):
+        raise IsoconvertError(f"precomputed: segment {segment} has no triangles")
+    if cells.min() < 0 or cells.max() >= len(vertices):
+        raise IsoconvertError(f"precomputed: a triangle of segment {segment} refers to no vertex")
+    if not np.isfinite(vertices).all():
+        raise IsoconvertError(f"precomputed: segment {segment} has non-finite vertices")
+
+
+def _dracopy():
+    try:
+        import DracoPy
+    except ImportError:
+        raise IsoconvertError(
+            'the precomputed format needs DracoPy: pip install "isoconvert[precomputed]"'
+        ) from None
+    return DracoPy
+
+
+def _layer_info(grid: dict, nm: float, data_type: str) -> dict:
+    """The segmentation layer's ``info``: one scale, the volume's size and spacing."""
+    affine = np.asarray(grid["affine"], dtype=np.float64)
+    resolution = [float(x) for x in np.linalg.norm(affine, axis=0) * nm]
+    size = [int(x) for x in grid["shape"]]
+    return {
+        "@type": "neuroglancer_multiscale_volume",
+        "type": "segmentation",
+        "data_type": data_type,
+        "num_channels": 1,
+        "scales": [
+            {
+                "key": "_".join(f"{r:g}" for r in resolution),
+                "size": size,
+                "resolution": resolution,
+                "voxel_offset": [0, 0, 0],
+                "chunk_sizes": [[min(64, s) for s in size]],
+                "encoding": "raw",
+            }
+        ],
+        "mesh": "mesh",
+    }
+
+
+def _object(levels: list[Mesh], bits: int, draco) -> tuple[bytes, bytes]:
+    """One object's manifest and fragment data: a fragment per level, at node 0."""
+    top = float(2**bits - 1)
+    lo = np.min([m.vertices.min(axis=0) for m in levels], axis=0)
+    hi = np.max([m.vertices.max(axis=0) for m in levels], axis=0)
+    # float32 in the manifest: the box is widened so that float32 rounding of its
+    # origin and shape cannot leave a vertex outside it
+    origin32 = np.nextafter(lo.astype(np.float32), np.float32(-np.inf))
+    shape32 = np.nextafter(
+        np.maximum(hi - origin32.astype(np.float64), 1e-6).astype(np.float32),
+        np.float32(np.inf),
+    )
+    chunk = shape32.astype(np.float64)
+    grid_origin = origin32.astype(np.float64)
+    fragments = []
+    for k, mesh in enumerate(levels):
+        node = chunk * 2.0**k
+        q = np.rint((mesh.vertices - grid_origin) / node * top)
+        q = np.clip(q, 0, top).astype(np.uint32)
+        fragments.append(
+            draco.encode(
+                q,
+                np.asarray(mesh.cells, dtype=np.uint32),
+                quantization_bits=bits,
+                quantization_range=top,
+                quantization_origin=[0.0, 0.0, 0.0],
+                compression_level=7,
+                # in its own order Draco merges vertices quantized to one position
+                # and drops the triangles that become degenerate (2 of the 40-label
+                # atlas's 2.2 million): this keeps every triangle
+                preserve_order=True,
+            )
+        )
+    n = len(levels)
+    parts = [
+        chunk.astype("<f4").tobytes(),
+        grid_origin.astype("<f4").tobytes(),
+        np.uint32(n).astype("<u4").tobytes(),
+        np.array([2.0**k for k in range(n)], "<f4").tobytes(),  # lod_scales
+        np.zeros((n, 3), "<f4").tobytes(),  # vertex_offsets
+        np.ones(n, "<u4").tobytes(),  # one fragment per level
+    ]
+    for fragment in fragments:
+        parts.append(np.zeros(3, "<u4").tobytes())  # its position: node (0, 0, 0)
+        parts.append(np.array([len(fragment)], "<u4").tobytes())
+    return b"".join(parts), b"".join(fragments)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _write_json(path: Path, value: dict) -> None:
+    path.write_text(json.dumps(value, indent=1) + "\n", encoding="utf-8")
+
+
+def _replace(work: Path, folder: Path) -> None:
+    """Rename the finished layer into place, replacing an old one only then."""
+    old = None
+    if folder.exists() or folder.is_symlink():
+        if not folder.is_dir() or folder.is_symlink():
+            raise OutputError(f"{folder} exists and is not a layer folder; remove it first")
+        old = Path(tempfile.mkdtemp(prefix=f".{folder.name}.old-", dir=work.parent))
+        os.replace(folder, old / folder.name)
+    os.replace(work, folder)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)

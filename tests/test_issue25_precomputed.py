@@ -1,0 +1,389 @@
+"""Neuroglancer precomputed layers (issue 25): written by isoconvert, read back by
+cloud-volume and DracoPy, their info files checked against the fields and types
+Neuroglancer's specification gives (volume.md, meshes.md)."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial import cKDTree
+
+from isoconvert.errors import IsoconvertError, OutputError
+from isoconvert.extract.labels import label_surfaces
+from isoconvert.mesh import Mesh
+from isoconvert.post.decimate import decimate
+from isoconvert.volume import Volume
+from isoconvert.writers.precomputed import write_precomputed
+
+DracoPy = pytest.importorskip("DracoPy", reason="pip install DracoPy")
+cloudvolume = pytest.importorskip("cloudvolume", reason="pip install cloud-volume")
+pytest.importorskip(
+    "meshoptimizer", reason='levels of detail need pip install "isoconvert[simplify]"'
+)
+pytest.importorskip("rtree", reason="trimesh.proximity needs rtree")
+
+NM_PER_UM = 1000.0
+
+
+def _atlas(n: int = 40, labels: int = 5, seed: int = 2) -> np.ndarray:
+    """(n, n, n) uint16 (Z, Y, X): Voronoi cells of a ball, ids 1..labels (some not 1-based)."""
+    rng = np.random.default_rng(seed)
+    seeds = rng.uniform(0.25 * n, 0.75 * n, size=(labels, 3))
+    z, y, x = np.mgrid[:n, :n, :n].astype(np.float64)
+    d = np.stack([(x - a) ** 2 + (y - b) ** 2 + (z - c) ** 2 for a, b, c in seeds])
+    out = (np.argmin(d, axis=0) * 3 + 2).astype(np.uint16)  # ids 2, 5, 8, ...
+    out[(x - n / 2) ** 2 + (y - n / 2) ** 2 + (z - n / 2) ** 2 > (0.42 * n) ** 2] = 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def labelled():
+    """Label meshes of an oblique, anisotropic volume in micrometres."""
+    angle = 0.3
+    direction = np.array(
+        [[np.cos(angle), -np.sin(angle), 0.0], [np.sin(angle), np.cos(angle), 0.0], [0, 0, 1.0]]
+    )
+    volume = Volume.from_zyx(
+        _atlas(),
+        spacing=(0.5, 0.4, 1.2),
+        origin=(100.0, -20.0, 7.5),
+        direction=direction,
+        unit="µm",
+    )
+    return volume, label_surfaces(volume, smoothing=16)
+
+
+@pytest.fixture(scope="module")
+def layer(tmp_path_factory, labelled):
+    volume, result = labelled
+    folder = tmp_path_factory.mktemp("layers") / "atlas ñ"
+    grid = next(iter(result.meshes.values())).info["grid"]
+    write_precomputed(
+        folder, result.meshes, grid, unit="µm", data_type="uint16", lods=3, decimate=_bounded
+    )
+    return folder
+
+
+def _bounded(mesh, bound):
+    return decimate(mesh, max_error=bound)
+
+
+def _cloud(folder):
+    return cloudvolume.CloudVolume(f"precomputed://file://{folder}", progress=False)
+
+
+def _half_step(mesh_vertices_index: np.ndarray, lod: int, bits: int = 16) -> np.ndarray:
+    """Half a quantization step per index axis for an object's box at a level."""
+    box = mesh_vertices_index.max(axis=0) - mesh_vertices_index.min(axis=0)
+    return 0.5 * box * 2.0**lod / (2**bits - 1)
+
+
+def _to_index(volume, world):
+    affine = np.asarray(volume.direction) * np.asarray(volume.spacing)
+    return (world - volume.origin) @ np.linalg.inv(affine).T
+
+
+def test_cloud_volume_reads_every_label_at_level_0_as_the_ply_surface(labelled, layer):
+    volume, result = labelled
+    cv = _cloud(layer)
+    for label, mesh in result.meshes.items():
+        back = cv.mesh.get(int(label), lod=0)[int(label)]
+        assert len(back.faces) == mesh.n_cells
+        # in the volume's world frame, micrometres: each vertex within half a step
+        # (per index axis) of the PLY's vertex at that place, plus the rounding of
+        # cloud-volume's float32 nanometres
+        world = np.asarray(back.vertices, np.float64) / NM_PER_UM
+        index_back = _to_index(volume, world)
+        index_ply = _to_index(volume, np.asarray(mesh.vertices))
+        _, nearest = cKDTree(index_ply).query(index_back)
+        error = np.abs(index_back - index_ply[nearest])
+        float32 = 2 * np.finfo(np.float32).eps * np.abs(back.vertices).max()
+        slack = float32 / (min(volume.spacing) * NM_PER_UM)
+        assert (error <= _half_step(index_ply, 0) + slack).all()
+        original = trimesh.Trimesh(mesh.vertices, mesh.cells, process=False)
+        decoded = trimesh.Trimesh(world, back.faces, process=False)
+        assert decoded.is_watertight == original.is_watertight
+        assert abs(decoded.volume - original.volume) < 1e-3 * abs(original.volume)
+
+
+def test_vertices_quantized_to_one_position_keep_their_triangles(tmp_path):
+    """Two vertices closer than a quantization step land on one position; Draco in
+    its own order would merge them and drop the sliver between them as degenerate
+    (the 40-label atlas had two such triangles)."""
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=10.0)
+    vertices = np.vstack([sphere.vertices + 12.0, sphere.vertices[0] + 12.0 + 1e-7])
+    n = len(sphere.vertices)
+    b = int(sphere.faces[sphere.faces[:, 0] == 0][0, 1])
+    cells = np.vstack([sphere.faces, [[0, n, b]]])
+    grid = {"shape": [25, 25, 25], "origin": [0.0, 0.0, 0.0], "affine": np.eye(3).tolist()}
+    mesh = Mesh(vertices, cells)
+    write_precomputed(tmp_path / "layer", {1: mesh}, grid, unit="nm")
+    back = _cloud(tmp_path / "layer").mesh.get(1, lod=0)[1]
+    assert len(back.faces) == len(cells)
+
+
+def test_coarser_levels_have_fewer_triangles_within_their_bound(labelled, layer):
+    volume, result = labelled
+    cv = _cloud(layer)
+    rng = np.random.default_rng(0)
+    for label, mesh in result.meshes.items():
+        original = trimesh.Trimesh(_to_index(volume, np.asarray(mesh.vertices)), mesh.cells)
+        previous = mesh.n_cells
+        for lod in (1, 2):
+            back = cv.mesh.get(int(label), lod=lod)[int(label)]
+            index = _to_index(volume, np.asarray(back.vertices, np.float64) / NM_PER_UM)
+            coarse = trimesh.Trimesh(index, back.faces, process=False)
+            assert len(back.faces) < previous
+            previous = len(back.faces)
+            # the decimation bound (index units) plus the level's quantization
+            bound = 2.0 ** (lod - 1) + np.linalg.norm(_half_step(original.vertices, lod)) + 1e-6
+            points = np.vstack([coarse.vertices, coarse.sample(3000, seed=rng)])
+            _, there, _ = trimesh.proximity.closest_point(original, points)
+            points = np.vstack([original.vertices, original.sample(3000, seed=rng)])
+            _, back_there, _ = trimesh.proximity.closest_point(coarse, points)
+            assert there.max() <= bound and back_there.max() <= bound
+
+
+def _manifest(path):
+    """The manifest's fields, parsed as meshes.md lays them out."""
+    raw = path.read_bytes()
+    chunk = np.frombuffer(raw, "<f4", 3, 0)
+    origin = np.frombuffer(raw, "<f4", 3, 12)
+    (n,) = np.frombuffer(raw, "<u4", 1, 24)
+    at = 28
+    scales = np.frombuffer(raw, "<f4", n, at)
+    at += 4 * n
+    offsets = np.frombuffer(raw, "<f4", 3 * n, at).reshape(n, 3)
+    at += 12 * n
+    counts = np.frombuffer(raw, "<u4", n, at)
+    at += 4 * n
+    positions, sizes = [], []
+    for lod in range(n):
+        k = int(counts[lod])
+        positions.append(np.frombuffer(raw, "<u4", 3 * k, at).reshape(3, k))
+        at += 12 * k
+        sizes.append(np.frombuffer(raw, "<u4", k, at))
+        at += 4 * k
+    assert at == len(raw)
+    return chunk, origin, int(n), scales, offsets, positions, sizes
+
+
+def test_dracopy_decodes_each_fragment_within_half_a_step_of_the_mesh(labelled, layer):
+    """Level 0 dequantized in float64 as meshes.md gives it: each vertex within
+    half a step, per index axis, of the mesh's."""
+    volume, result = labelled
+    info = json.loads((layer / "mesh" / "info").read_text())
+    top = 2 ** info["vertex_quantization_bits"]
+    for index in sorted((layer / "mesh").glob("*.index")):
+        chunk, origin, n, scales, offsets, positions, sizes = _manifest(index)
+        mesh = result.meshes[int(index.stem)]
+        data = (layer / "mesh" / index.stem).read_bytes()
+        assert sum(int(s.sum()) for s in sizes) == len(data)
+        assert (chunk > 0).all() and n == 3 and (np.diff(scales) > 0).all()
+        assert not offsets.any()
+        start = 0
+        for lod in range(n):
+            assert positions[lod].shape == (3, 1) and not positions[lod].any()
+            for size in sizes[lod]:
+                fragment = DracoPy.decode(data[start : start + int(size)])
+                start += int(size)
+                points = np.asarray(fragment.points)
+                assert len(fragment.faces) > 0
+                assert points.min() >= 0 and points.max() < top
+                assert np.array_equal(points, np.rint(points))  # integer positions
+                if lod == 0:
+                    step = chunk.astype(np.float64) / (top - 1)
+                    place = origin.astype(np.float64) + points * step
+                    index_ply = _to_index(volume, np.asarray(mesh.vertices))
+                    _, nearest = cKDTree(index_ply).query(place)
+                    assert (np.abs(place - index_ply[nearest]) <= 0.5 * step + 1e-9).all()
+                    assert len(fragment.faces) == mesh.n_cells
+
+
+# the fields and types of volume.md's info and meshes.md's mesh info, written out
+_UINT3 = {"type": "array", "items": {"type": "integer", "minimum": 0}, "minItems": 3, "maxItems": 3}
+_NUM3 = {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3}
+LAYER_SCHEMA = {
+    "type": "object",
+    "required": ["type", "data_type", "num_channels", "scales"],
+    "properties": {
+        "@type": {"const": "neuroglancer_multiscale_volume"},
+        "type": {"enum": ["image", "segmentation"]},
+        "data_type": {
+            "enum": ["uint8", "int8", "uint16", "int16", "uint32", "int32", "uint64", "float32"]
+        },
+        "num_channels": {"type": "integer", "minimum": 1},
+        "mesh": {"type": "string"},
+        "scales": {
+            "type": "array",
+            "minItems": 1,
+            "items": {
+                "type": "object",
+                "required": [
+                    "key",
+                    "size",
+                    "resolution",
+                    "voxel_offset",
+                    "chunk_sizes",
+                    "encoding",
+                ],
+                "properties": {
+                    "key": {"type": "string", "minLength": 1},
+                    "size": _UINT3,
+                    "resolution": {**_NUM3, "items": {"type": "number", "exclusiveMinimum": 0}},
+                    "voxel_offset": {**_UINT3, "items": {"type": "integer"}},
+                    "chunk_sizes": {"type": "array", "minItems": 1, "items": _UINT3},
+                    "encoding": {
+                        "enum": ["raw", "jpeg", "png", "compressed_segmentation", "compresso"]
+                    },
+                },
+            },
+        },
+    },
+}
+MESH_SCHEMA = {
+    "type": "object",
+    "required": ["@type", "vertex_quantization_bits", "transform", "lod_scale_multiplier"],
+    "properties": {
+        "@type": {"const": "neuroglancer_multilod_draco"},
+        "vertex_quantization_bits": {"enum": [10, 16]},
+        "transform": {"type": "array", "items": {"type": "number"}, "minItems": 12, "maxItems": 12},
+        "lod_scale_multiplier": {"type": "number"},
+        "sharding": {"type": "object"},
+    },
+}
+
+
+def test_info_files_follow_the_specification(labelled, layer):
+    import jsonschema
+
+    volume, _ = labelled
+    info = json.loads((layer / "info").read_text())
+    jsonschema.validate(info, LAYER_SCHEMA)
+    jsonschema.validate(json.loads((layer / "mesh" / "info").read_text()), MESH_SCHEMA)
+    assert info["type"] == "segmentation" and info["data_type"] == "uint16"
+    assert info["scales"][0]["size"] == list(volume.shape)
+    assert np.allclose(info["scales"][0]["resolution"], np.asarray(volume.spacing) * NM_PER_UM)
+    mesh_info = json.loads((layer / info["mesh"] / "info").read_text())
+    transform = np.array(mesh_info["transform"]).reshape(3, 4)
+    affine = np.asarray(volume.direction) * np.asarray(volume.spacing) * NM_PER_UM
+    assert np.allclose(transform[:, :3], affine) and np.allclose(
+        transform[:, 3], volume.origin * 1e3
+    )
+    assert oct(os.stat(layer).st_mode & 0o777) == oct(0o777 & ~_umask())
+
+
+def _umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def test_a_failed_write_leaves_nothing_and_an_existing_layer_needs_force(tmp_path, labelled):
+    _, result = labelled
+    grid = next(iter(result.meshes.values())).info["grid"]
+    meshes = dict(result.meshes)
+    bad = next(iter(meshes.values()))
+    meshes[999] = type(bad)(bad.vertices, np.array([[0, 1, 10**9]]), None, bad.info)
+    with pytest.raises(IsoconvertError, match="999"):
+        write_precomputed(tmp_path / "layer", meshes, grid, unit="µm")
+    assert list(tmp_path.iterdir()) == []
+    write_precomputed(tmp_path / "layer", result.meshes, grid, unit="µm")
+    with pytest.raises(OutputError, match="exists"):
+        write_precomputed(tmp_path / "layer", result.meshes, grid, unit="µm")
+    before = sorted(p.name for p in (tmp_path / "layer" / "mesh").iterdir())
+    write_precomputed(tmp_path / "layer", {2: result.meshes[2]}, grid, unit="µm", force=True)
+    after = sorted(p.name for p in (tmp_path / "layer" / "mesh").iterdir())
+    assert after == ["2", "2.index", "info"] and len(before) > len(after)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["layer"]
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"bits": 12}, "10 or 16"),
+        ({"lods": 0}, "1 or more"),
+        ({"data_type": "float32"}, "cannot be a segmentation"),
+    ],
+)
+def test_bad_options_are_errors(tmp_path, labelled, kwargs, message):
+    _, result = labelled
+    grid = next(iter(result.meshes.values())).info["grid"]
+    with pytest.raises(IsoconvertError, match=message):
+        write_precomputed(tmp_path / "layer", result.meshes, grid, **kwargs)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_convert_labels_writes_a_layer_cloud_volume_reads(tmp_path, capsys):
+    """The command: a NRRD label volume in millimetres to a layer in a folder
+    whose name is not ASCII; each label's mesh at level 0 is its PLY's."""
+    import nrrd
+
+    from isoconvert.cli import main
+    from isoconvert.meshfile import read_mesh
+
+    labels = np.ascontiguousarray(_atlas(24, 3).T.astype(np.uint8))  # x fastest, as NRRD
+    path = tmp_path / "atlas.nrrd"
+    nrrd.write(str(path), labels, {"spacings": [0.5, 0.5, 1.0], "space units": ["mm"] * 3})
+    layer = tmp_path / "layér"
+    assert main(["convert", str(path), "--labels", "-o", str(layer), "--format", "precomputed",
+                 "--lods", "2", "-q"]) == 0  # fmt: skip
+    assert main(["convert", str(path), "--labels", "-o", str(tmp_path / "a.ply"), "-q"]) == 0
+    cv = _cloud(layer)
+    assert json.loads((layer / "info").read_text())["scales"][0]["resolution"] == [5e5, 5e5, 1e6]
+    for value in np.unique(labels[labels > 0]):
+        ply = read_mesh(tmp_path / f"a_label{value}.ply")
+        back = cv.mesh.get(int(value), lod=0)[int(value)]
+        assert len(back.faces) == ply.n_cells
+        _, nearest = cKDTree(ply.vertices * 1e6).query(back.vertices)
+        assert np.abs(back.vertices - ply.vertices[nearest] * 1e6).max() < 0.5e6 * 0.01
+        assert len(cv.mesh.get(int(value), lod=1)[int(value)].faces) < ply.n_cells
+    # taken, then replaced with --force; the wrong uses are one line each
+    capsys.readouterr()
+    assert (
+        main(["convert", str(path), "--labels", "-o", str(layer), "--format", "precomputed"]) == 1
+    )
+    assert "exists" in capsys.readouterr().err
+    args = ["convert", str(path), "-o", str(tmp_path / "x"), "--format", "precomputed"]
+    for extra, message in [
+        (["--level", "1"], "use it with convert --labels"),
+        (["--labels", "--lods", "0"], "1 or more"),
+        (["--labels", "--single-file"], "leave out --single-file"),
+    ]:
+        assert main(args + extra) == 1
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x").exists()
+    # a layer folder holding the input is never replaced
+    inside = layer / "atlas.nrrd"
+    inside.write_bytes(path.read_bytes())
+    assert main(["convert", str(inside), "--labels", "-o", str(layer), "--format", "precomputed",
+                 "-f"]) == 1  # fmt: skip
+    assert "holds the input" in capsys.readouterr().err and inside.exists()
+    assert main(["batch", str(path), "-o", str(tmp_path / "b"), "--format", "precomputed",
+                 "--labels"]) != 0  # fmt: skip
+    assert "convert --labels" in capsys.readouterr().err
+
+
+def test_a_real_label_volume_becomes_a_layer(tmp_path):
+    """The bat cochlea (a binary segmentation, 121 x 154 x 114): its surface at
+    every level of detail, read back by cloud-volume, closed as its PLY is."""
+    from conftest import dataset
+
+    from isoconvert.label_convert import convert_labels
+
+    path = dataset("bat-cochlea-volume.tif")
+    results = convert_labels(path, tmp_path / "layer", format="precomputed", lods=3)
+    (mesh,) = [r.mesh for r in results]
+    cv = _cloud(tmp_path / "layer")
+    label = int(results[0].output.name)
+    counts = [len(cv.mesh.get(label, lod=k)[label].faces) for k in range(3)]
+    assert counts[0] == mesh.n_cells and counts[0] > counts[1] > counts[2]
+    back = cv.mesh.get(label, lod=0)[label]
+    original = trimesh.Trimesh(mesh.vertices, mesh.cells, process=False)
+    decoded = trimesh.Trimesh(back.vertices, back.faces, process=False)
+    assert decoded.is_watertight == original.is_watertight
