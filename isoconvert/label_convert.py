@@ -164,7 +164,6 @@ def convert_labels(
                 )
             )
             continue
-        extracted = surfaces[label]
         progress("writing")
         written = write_mesh(mesh, path, format=writer.name, ascii=opts.ascii, force=opts.force)
         results.append(

@@ -331,7 +331,7 @@ def test_convert_labels_writes_a_layer_cloud_volume_reads(tmp_path, capsys):
     nrrd.write(str(path), labels, {"spacings": [0.5, 0.5, 1.0], "space units": ["mm"] * 3})
     layer = tmp_path / "layér"
     assert main(["convert", str(path), "--labels", "-o", str(layer), "--format", "precomputed",
-                 "--lods", "2", "-q"]) == 0  # fmt: skip
+                 "--lods", "2", "-q", "--report", str(tmp_path / "r.json")]) == 0  # fmt: skip
     assert main(["convert", str(path), "--labels", "-o", str(tmp_path / "a.ply"), "-q"]) == 0
     cv = _cloud(layer)
     assert json.loads((layer / "info").read_text())["scales"][0]["resolution"] == [5e5, 5e5, 1e6]
@@ -342,6 +342,8 @@ def test_convert_labels_writes_a_layer_cloud_volume_reads(tmp_path, capsys):
         _, nearest = cKDTree(ply.vertices * 1e6).query(back.vertices)
         assert np.abs(back.vertices - ply.vertices[nearest] * 1e6).max() < 0.5e6 * 0.01
         assert len(cv.mesh.get(int(value), lod=1)[int(value)].faces) < ply.n_cells
+        report = json.loads((tmp_path / f"r_{value}.json").read_text())
+        assert report["checks"]["watertight"] and report["counts"]["triangles"] == ply.n_cells
     # taken, then replaced with --force; the wrong uses are one line each
     capsys.readouterr()
     assert (

@@ -194,8 +194,7 @@ def stored_mesh(
     FormatError
         Unknown format, or cells it cannot hold.
     """
-    writer = WRITERS.get(format)
-    _refuse_layer(writer)
+    writer = WRITERS.get(format)  # a layer (precomputed): each object's mesh, in float64
     _check_cells(writer, mesh, writer.name)
     return _stored(writer, mesh, on_status)
 
