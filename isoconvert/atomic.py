@@ -302,6 +302,70 @@ def atomic_output(
         raise
 
 
+@contextlib.contextmanager
+def atomic_folder(path: str | Path, force: bool = False) -> Iterator[Path]:
+    """A temporary folder beside ``path``, renamed to ``path`` on success.
+
+    The folder outputs' :func:`atomic_output` (a Neuroglancer layer): on any
+    exception, a signal included, the temporary folder is removed; an existing
+    ``path`` is replaced only with ``force``, and only once the new folder is
+    complete. A full disk is the one-line :class:`DiskFullError`, any other
+    failure to write an :class:`OutputError`.
+    """
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    owner = _owner_tag()
+    keep = _name_max(parent) - len(".") - len(f".{owner}-XXXXXXXX.part") - 8
+    stem = os.fsencode(path.name)[: max(keep, 1)].decode("utf-8", "ignore") or "out"
+    _remove_stale_parts(parent, stem)
+    signals.defer()  # held until the block that removes the folder is entered
+    try:
+        tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{stem}.{owner}-", suffix=".part"))
+    except OSError as exc:
+        signals.resume()
+        raise OutputError(f"{path}: cannot create a folder there ({exc.strerror})") from None
+    try:
+        signals.resume()
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp's 0700 would hide it from a web server
+        yield tmp
+        _replace_folder(tmp, path, force)
+    except OSError as exc:
+        written = _tree_size(tmp)
+        shutil.rmtree(tmp, ignore_errors=True)
+        if exc.errno in DISK_FULL_ERRNOS:
+            raise disk_full_error(path, written, more=True) from None
+        raise OutputError(f"{path}: writing failed ({exc.strerror or exc})") from None
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _replace_folder(tmp: Path, path: Path, force: bool) -> None:
+    """Rename the finished folder into place, moving an old one away only then."""
+    if not (path.exists() or path.is_symlink()):
+        os.replace(tmp, path)
+        return
+    if not force or not path.is_dir() or path.is_symlink():
+        raise OutputError(
+            f"{path}: appeared while writing, or is not a folder; choose another name"
+        )
+    old = Path(tempfile.mkdtemp(dir=tmp.parent, prefix=f".{path.name}.old-"))
+    os.replace(path, old / path.name)
+    os.replace(tmp, path)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _tree_size(folder: Path) -> int:
+    total = 0
+    for root, _, files in os.walk(folder):
+        for name in files:
+            with contextlib.suppress(OSError):
+                total += os.stat(os.path.join(root, name)).st_size
+    return total
+
+
 def _owner_tag() -> str:
     """``HOST~PID`` of this process, in its temporary files' names: a file left by
     a process that died without cleaning up (SIGKILL, a power cut) can then be
@@ -325,6 +389,9 @@ def _remove_stale_parts(folder: Path, stem: str) -> None:
         found = _OWNER.search(candidate.name)
         if found is None or found["host"] != host or _alive(int(found["pid"])):
             continue  # not ours to judge: another host's, or still being written
+        if candidate.is_dir() and not candidate.is_symlink():  # an atomic_folder's
+            shutil.rmtree(candidate, ignore_errors=True)
+            continue
         with contextlib.suppress(OSError):
             candidate.unlink()
 

@@ -6,6 +6,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
@@ -389,3 +393,49 @@ def test_a_real_label_volume_becomes_a_layer(tmp_path):
     original = trimesh.Trimesh(mesh.vertices, mesh.cells, process=False)
     decoded = trimesh.Trimesh(back.vertices, back.faces, process=False)
     assert decoded.is_watertight == original.is_watertight
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_a_signal_while_the_layer_is_written_leaves_nothing(tmp_path, signum):
+    """Stopped while it decimates the levels of detail into the temporary folder:
+    the exit status of the signal, one line, and nothing in the output folder."""
+    atlas = tmp_path / "atlas.npy"
+    np.save(atlas, _atlas(96, 24))
+    out = tmp_path / "out"
+    out.mkdir()
+    args = ["convert", str(atlas), "--labels", "--format", "precomputed", "--lods", "4"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "isoconvert", *args, "-o", str(out / "layer"), "-q"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    end = time.monotonic() + 90
+    while not any(p.name.endswith(".part") for p in out.iterdir()):
+        assert proc.poll() is None, proc.communicate()[1].decode()
+        assert time.monotonic() < end, "no temporary folder appeared"
+        time.sleep(0.01)
+    time.sleep(0.2)  # inside the writing
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signum, err.decode()
+    assert len(err.decode().strip().splitlines()) == 1
+    assert list(out.iterdir()) == []
+
+
+def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, labelled, monkeypatch):
+    import errno
+    from pathlib import Path
+
+    _, result = labelled
+    grid = next(iter(result.meshes.values())).info["grid"]
+    real = Path.write_bytes
+
+    def full(self, data):
+        if self.suffix == ".index":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(self, data)
+
+    monkeypatch.setattr(Path, "write_bytes", full)
+    with pytest.raises(OutputError, match="disk full at"):
+        write_precomputed(tmp_path / "layer", result.meshes, grid, unit="µm")
+    assert list(tmp_path.iterdir()) == []

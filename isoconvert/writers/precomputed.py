@@ -38,14 +38,12 @@ block-wise and Dask writing, and the labels' own chunks (``--with-volume``).
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import tempfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_folder
 from ..errors import FormatError, IsoconvertError, OutputError
 from ..geometry import normalized_grid
 from ..mesh import Mesh
@@ -229,10 +227,7 @@ def write_precomputed(
     inverse = np.linalg.inv(np.asarray(clean["affine"], dtype=np.float64))
     origin = np.asarray(clean["origin"], dtype=np.float64)
 
-    parent = folder.parent if str(folder.parent) else Path(".")
-    work = Path(tempfile.mkdtemp(prefix=f".{folder.name}.part-", dir=parent))
-    try:
-        work.chmod(0o777 & ~_umask())  # mkdtemp's 0700 would hide the layer from a server
+    with atomic_folder(folder, force) as work:
         (work / "mesh").mkdir()
         _write_json(work / "info", _layer_info(clean, nm, data_type))
         _write_json(
@@ -252,10 +247,6 @@ def write_precomputed(
             manifest, data = _object(levels, bits, draco)
             (work / "mesh" / f"{int(segment)}.index").write_bytes(manifest)
             (work / "mesh" / f"{int(segment)}").write_bytes(data)
-        _replace(work, folder)
-    except BaseException:
-        shutil.rmtree(work, ignore_errors=True)
-        raise
     return folder
 
 
@@ -352,24 +343,5 @@ def _object(levels: list[Mesh], bits: int, draco) -> tuple[bytes, bytes]:
     return b"".join(parts), b"".join(fragments)
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 def _write_json(path: Path, value: dict) -> None:
     path.write_text(json.dumps(value, indent=1) + "\n", encoding="utf-8")
-
-
-def _replace(work: Path, folder: Path) -> None:
-    """Rename the finished layer into place, replacing an old one only then."""
-    old = None
-    if folder.exists() or folder.is_symlink():
-        if not folder.is_dir() or folder.is_symlink():
-            raise OutputError(f"{folder} exists and is not a layer folder; remove it first")
-        old = Path(tempfile.mkdtemp(prefix=f".{folder.name}.old-", dir=work.parent))
-        os.replace(folder, old / folder.name)
-    os.replace(work, folder)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
