@@ -439,3 +439,17 @@ def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, labelled, monkeypa
     with pytest.raises(OutputError, match="disk full at"):
         write_precomputed(tmp_path / "layer", result.meshes, grid, unit="µm")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_part_folder_of_a_killed_run_is_removed(tmp_path, labelled):
+    from isoconvert.atomic import _owner_tag
+
+    _, result = labelled
+    grid = next(iter(result.meshes.values())).info["grid"]
+    host = _owner_tag().split("~")[0]
+    stale = tmp_path / f".layer.{host}~99999999-abcd1234.part"
+    (stale / "mesh").mkdir(parents=True)
+    other = tmp_path / f".layer.{_owner_tag()}-live0000.part"  # this process: alive
+    other.mkdir()
+    write_precomputed(tmp_path / "layer", result.meshes, grid, unit="µm")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([other.name, "layer"])
