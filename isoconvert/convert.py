@@ -93,6 +93,9 @@ class ConvertOptions:
         Labels: Surface Nets relaxation iterations (None: 16; 0: the voxel faces).
     lods : int
         Levels of detail of a precomputed layer (1: the meshes as extracted).
+    fragment_size : float or None
+        A precomputed layer's octree fragments, in voxels a side (None: one per
+        object and level).
     """
 
     read: ReadOptions = field(default_factory=ReadOptions)
@@ -119,6 +122,7 @@ class ConvertOptions:
     background: int = 0
     label_smoothing: int | None = None
     lods: int = 3
+    fragment_size: float | None = None
 
     def updated(self, **changes) -> ConvertOptions:
         """A copy with ``changes``; names of :class:`ReadOptions` fields go to

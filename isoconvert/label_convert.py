@@ -83,7 +83,7 @@ def convert_labels(
             raise IsoconvertError(
                 f"{writer.name} is a layer of every label already; leave out --single-file"
             )
-        check_layer(output, opts.force, opts.lods, [input])
+        check_layer(output, opts.force, opts.lods, [input], opts.fragment_size)
     elif opts.single_file:
         check_output(output, opts.force)
         check_attributes(writer, output, labels=True)
@@ -124,7 +124,7 @@ def convert_labels(
         else label_outputs(output, surfaces.labels)
     )
     if writer.layer:
-        check_layer(output, opts.force, opts.lods, volume.files)
+        check_layer(output, opts.force, opts.lods, volume.files, opts.fragment_size)
     else:
         for path in outputs:  # every name is checked before the first file is written
             check_output(path, opts.force, inputs=volume.files)
@@ -151,6 +151,7 @@ def convert_labels(
             data_type=data_type_for(max(surfaces.labels)),
             lods=opts.lods,
             decimate=_bounded,
+            chunk=opts.fragment_size,
             force=opts.force,
             on_status=on_status,
         )

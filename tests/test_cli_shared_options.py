@@ -29,6 +29,7 @@ CONVERT_ONLY = {
     "input_format": "batch picks each file's reader by its suffix as it finds the files",
     "series": "batch converts every series of a DICOM folder (a --levels entry may pick one)",
     "lods": "the levels of detail of a precomputed layer, which batch does not write",
+    "fragment_size": "the octree fragments of a precomputed layer, which batch does not write",
 }
 #: Options only batch has.
 BATCH_ONLY = {

@@ -359,6 +359,7 @@ def test_convert_labels_writes_a_layer_cloud_volume_reads(tmp_path, capsys):
         (["--level", "1"], "use it with convert --labels"),
         (["--labels", "--lods", "0"], "1 or more"),
         (["--labels", "--single-file"], "leave out --single-file"),
+        (["--labels", "--fragment-size", "0"], "1 voxel a side or more"),
     ]:
         assert main(args + extra) == 1
         err = capsys.readouterr().err
@@ -453,3 +454,42 @@ def test_the_part_folder_of_a_killed_run_is_removed(tmp_path, labelled):
     other.mkdir()
     write_precomputed(tmp_path / "layer", result.meshes, grid, unit="µm")
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([other.name, "layer"])
+
+
+def _morton(x, y, z):
+    return sum(((v >> b) & 1) << (3 * b + a) for b in range(10) for a, v in enumerate((x, y, z)))
+
+
+@pytest.mark.parametrize("size", [5.0, 8.0])
+def test_fragments_are_an_octree_whose_seams_stay_closed(tmp_path, labelled, size):
+    """--fragment-size: each level cut into octree nodes; cloud-volume's union of
+    the fragments is the label's closed surface (seams included) at every level,
+    level 0 within a quantization step of the PLY's surface both ways (half a step
+    of rounding, less than one of snapping to a fragment's side)."""
+    volume, result = labelled
+    grid = next(iter(result.meshes.values())).info["grid"]
+    layer = tmp_path / "layer"
+    write_precomputed(layer, result.meshes, grid, unit="µm", lods=3, decimate=_bounded, chunk=size)
+    cv = _cloud(layer)
+    for label, mesh in result.meshes.items():
+        chunk, _, n, _, _, positions, sizes = _manifest(layer / "mesh" / f"{label}.index")
+        assert np.allclose(chunk, size) and n == 3
+        assert positions[0].shape[1] > 1  # cut into several fragments
+        for lod in range(n):
+            keys = [_morton(*p) for p in positions[lod].T]
+            assert keys == sorted(keys) and len(set(keys)) == len(keys)  # Z-curve order
+            if lod + 1 < n:  # every node's parent is listed at the next level
+                parents = {tuple(p) for p in positions[lod + 1].T}
+                assert {tuple(p // 2) for p in positions[lod].T} <= parents
+        original = trimesh.Trimesh(_to_index(volume, np.asarray(mesh.vertices)), mesh.cells)
+        for lod in range(n):
+            back = cv.mesh.get(int(label), lod=lod)[int(label)]
+            index = _to_index(volume, np.asarray(back.vertices, np.float64) / NM_PER_UM)
+            union = trimesh.Trimesh(index, back.faces, process=True)  # fragments joined
+            assert union.is_watertight
+            if lod == 0:
+                assert abs(union.area / original.area - 1) < 1e-4
+                step = np.linalg.norm(chunk / (2**16 - 1)) + 1e-5
+                _, there, _ = trimesh.proximity.closest_point(original, union.vertices)
+                _, back_there, _ = trimesh.proximity.closest_point(union, original.vertices)
+                assert there.max() <= step and back_there.max() <= step

@@ -17,6 +17,7 @@ from .options import (
     ExamplesOpt,
     ExtractArgs,
     ForceOpt,
+    FragmentSizeOpt,
     LabelArgs,
     LevelOpt,
     LodsOpt,
@@ -74,6 +75,7 @@ def convert(
     memory: MemoryArgs = MemoryArgs(),
     labels: LabelArgs = LabelArgs(),
     lods: LodsOpt = 3,
+    fragment_size: FragmentSizeOpt = None,
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
     _quiet_third_party()
@@ -94,6 +96,7 @@ def convert(
         values=values,
         blocks=memory.blocks(),
         lods=lods,
+        fragment_size=fragment_size,
     )
     by_label = options.labels is not None
     if not by_label and not level:

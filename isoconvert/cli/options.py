@@ -523,6 +523,18 @@ LodsOpt = Annotated[
 ]
 
 
+#: convert's octree fragments of --format precomputed
+FragmentSizeOpt = Annotated[
+    float | None,
+    typer.Option(
+        help="Cut each object of --format precomputed into fragments of this many voxels "
+        "a side (octree nodes a viewer loads one by one); default: one fragment per object "
+        "and level of detail.",
+        rich_help_panel="Output",
+    ),
+]
+
+
 def _convert_options(
     read: ReadArgs,
     extract: ExtractArgs,

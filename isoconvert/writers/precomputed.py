@@ -30,8 +30,10 @@ crosses the node's 2x2x2 partition, as the format asks. Quantizing in that box
 moves a vertex by at most half a step: ``box * 2**k / (2**bits - 1) / 2``
 per axis.
 
-Not built yet (issue 25): octree nodes smaller than the object (fragments that
-stream parts of large objects), sharding, the legacy single-resolution format,
+With ``chunk`` the octree's finest nodes are that many index units a side instead,
+and each level is cut into the nodes it crosses (:func:`_object`, :func:`_cut`).
+
+Not built yet (issue 25): sharding, the legacy single-resolution format,
 block-wise and Dask writing, and the labels' own chunks (``--with-volume``).
 """
 
@@ -77,7 +79,11 @@ def data_type_for(largest: int) -> str:
 
 
 def check_layer(
-    folder: str | Path, force: bool, lods: int, inputs: Sequence[str | Path] = ()
+    folder: str | Path,
+    force: bool,
+    lods: int,
+    inputs: Sequence[str | Path] = (),
+    chunk: float | None = None,
 ) -> None:
     """Fail before any work when a layer cannot be written: DracoPy or (for more
     than one level of detail) meshoptimizer missing, or the folder taken.
@@ -92,6 +98,7 @@ def check_layer(
     """
     _dracopy()
     _check_lods(lods)
+    _check_chunk(chunk)
     if lods > 1:
         try:
             import meshoptimizer  # noqa: F401
@@ -116,6 +123,11 @@ def check_layer(
                     f"{folder} holds the input {path}; replacing the layer would delete it: "
                     "write the layer elsewhere"
                 )
+
+
+def _check_chunk(chunk) -> None:
+    if chunk is not None and not (np.isfinite(chunk) and chunk >= 1):
+        raise IsoconvertError(f"precomputed: fragments must be 1 voxel a side or more, got {chunk}")
 
 
 def _check_lods(lods) -> None:
@@ -156,6 +168,7 @@ def write_precomputed(
     lods: int = 1,
     decimate: Callable[[Mesh, float], Mesh] | None = None,
     bits: int = 16,
+    chunk: float | None = None,
     force: bool = False,
     on_status: Callable[[str], None] | None = None,
 ) -> Path:
@@ -184,6 +197,9 @@ def write_precomputed(
         ``max_error``); needed for more than one level.
     bits : int
         Vertex quantization bits, 10 or 16.
+    chunk : float or None
+        The octree's finest nodes, in index units (cubes): an object larger is cut
+        into fragments a viewer can load one by one. None: a fragment per level.
     force : bool
         Replace an existing folder.
     on_status : callable or None
@@ -205,6 +221,7 @@ def write_precomputed(
     if bits not in QUANTIZATION_BITS:
         raise IsoconvertError(f"precomputed: quantization bits must be 10 or 16, got {bits}")
     _check_lods(lods)
+    _check_chunk(chunk)
     if lods > 1 and decimate is None:
         raise IsoconvertError("precomputed: levels of detail above 0 need a decimate function")
     if data_type not in _DATA_TYPES:
@@ -244,7 +261,7 @@ def write_precomputed(
             index = (np.asarray(mesh.vertices, dtype=np.float64) - origin) @ inverse.T
             full = Mesh(index, np.asarray(mesh.cells, dtype=np.int64))
             levels = [full] + [decimate(full, float(2 ** (k - 1))) for k in range(1, lods)]
-            manifest, data = _object(levels, bits, draco)
+            manifest, data = _object(levels, bits, draco, chunk)
             (work / "mesh" / f"{int(segment)}.index").write_bytes(manifest)
             (work / "mesh" / f"{int(segment)}").write_bytes(data)
     return folder
@@ -295,52 +312,192 @@ def _layer_info(grid: dict, nm: float, data_type: str) -> dict:
     }
 
 
-def _object(levels: list[Mesh], bits: int, draco) -> tuple[bytes, bytes]:
-    """One object's manifest and fragment data: a fragment per level, at node 0."""
+def _object(
+    levels: list[Mesh], bits: int, draco, chunk: float | None = None
+) -> tuple[bytes, bytes]:
+    """One object's manifest and fragment data.
+
+    The octree's finest nodes are ``chunk`` index units wide (cubes), or, when
+    ``chunk`` is None or the object fits in one, the object's bounding box: then
+    every level is a single fragment. Otherwise each level's mesh is cut at the
+    planes of its nodes' 2x2x2 partition (:func:`_cut`) and its triangles go to
+    the node holding their centroid.
+    """
     top = float(2**bits - 1)
     lo = np.min([m.vertices.min(axis=0) for m in levels], axis=0)
     hi = np.max([m.vertices.max(axis=0) for m in levels], axis=0)
     # float32 in the manifest: the box is widened so that float32 rounding of its
     # origin and shape cannot leave a vertex outside it
     origin32 = np.nextafter(lo.astype(np.float32), np.float32(-np.inf))
-    shape32 = np.nextafter(
-        np.maximum(hi - origin32.astype(np.float64), 1e-6).astype(np.float32),
-        np.float32(np.inf),
-    )
-    chunk = shape32.astype(np.float64)
     grid_origin = origin32.astype(np.float64)
-    fragments = []
+    box32 = np.nextafter(
+        np.maximum(hi - grid_origin, 1e-6).astype(np.float32), np.float32(np.inf)
+    ).astype(np.float64)
+    cut = not (chunk is None or (box32 <= chunk).all())
+    shape = np.full(3, float(np.float32(chunk))) if cut else box32
+    nodes: list[dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]] = []
     for k, mesh in enumerate(levels):
-        node = chunk * 2.0**k
-        q = np.rint((mesh.vertices - grid_origin) / node * top)
-        q = np.clip(q, 0, top).astype(np.uint32)
-        fragments.append(
-            draco.encode(
-                q,
-                np.asarray(mesh.cells, dtype=np.uint32),
-                quantization_bits=bits,
-                quantization_range=top,
-                quantization_origin=[0.0, 0.0, 0.0],
-                compression_level=7,
-                # in its own order Draco merges vertices quantized to one position
-                # and drops the triangles that become degenerate (2 of the 40-label
-                # atlas's 2.2 million): this keeps every triangle
-                preserve_order=True,
+        node = shape * 2.0**k
+        vertices, cells = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.cells, np.int64)
+        split = node / 2.0 if k else node
+        for axis in range(3):
+            first = int(np.floor((lo[axis] - grid_origin[axis]) / split[axis])) + 1
+            last = int(np.ceil((hi[axis] - grid_origin[axis]) / split[axis])) - 1
+            for m in range(max(first, 1), last + 1):
+                plane = grid_origin[axis] + m * split[axis]
+                # vertices within a quantization step of the plane go onto it
+                # first (igneous snaps too): cut there, they would leave slivers
+                # whose corners quantize to one position
+                near = np.abs(vertices[:, axis] - plane) < node[axis] / top
+                if near.any():
+                    vertices = vertices.copy()
+                    vertices[near, axis] = plane
+                vertices, cells = _cut(vertices, cells, axis, plane)
+        centroid = vertices[cells].mean(axis=1)
+        where = np.floor((centroid - grid_origin) / node).astype(np.int64)
+        where = np.maximum(where, 0)
+        order = np.lexsort(where.T[::-1])
+        where, cells = where[order], cells[order]
+        starts = np.flatnonzero(np.r_[True, (where[1:] != where[:-1]).any(axis=1)])
+        level = {}
+        for a, b in zip(starts, np.r_[starts[1:], len(cells)], strict=True):
+            used, local = np.unique(cells[a:b], return_inverse=True)
+            origin = grid_origin + where[a] * node
+            q = np.clip(np.rint((vertices[used] - origin) / node * top), 0, top)
+            local = local.reshape(-1, 3)
+            if cut:
+                # corners the cuts left within a step of each other share a
+                # quantized position: one vertex, and the triangles between them
+                # (no area) go; on a seam both fragments see the same positions,
+                # so they merge alike and the seam stays closed
+                q, same = np.unique(q, axis=0, return_inverse=True)
+                local = same.reshape(-1)[local]
+                local = local[(local[:, 0] != local[:, 1]) & (local[:, 1] != local[:, 2])
+                              & (local[:, 0] != local[:, 2])]  # fmt: skip
+            level[tuple(int(x) for x in where[a])] = (
+                q.astype(np.uint32),
+                local.astype(np.uint32),
             )
-        )
-    n = len(levels)
+        nodes.append(level)
+    # every node's parent is listed too (empty when the coarser level has no
+    # triangles there), as the viewer walks the octree down from the top
+    for k in range(len(nodes) - 1):
+        for x, y, z in list(nodes[k]):
+            nodes[k + 1].setdefault((x // 2, y // 2, z // 2), None)
     parts = [
-        chunk.astype("<f4").tobytes(),
+        shape.astype("<f4").tobytes(),
         grid_origin.astype("<f4").tobytes(),
-        np.uint32(n).astype("<u4").tobytes(),
-        np.array([2.0**k for k in range(n)], "<f4").tobytes(),  # lod_scales
-        np.zeros((n, 3), "<f4").tobytes(),  # vertex_offsets
-        np.ones(n, "<u4").tobytes(),  # one fragment per level
+        np.uint32(len(nodes)).astype("<u4").tobytes(),
+        np.array([2.0**k for k in range(len(nodes))], "<f4").tobytes(),  # lod_scales
+        np.zeros((len(nodes), 3), "<f4").tobytes(),  # vertex_offsets
+        np.array([len(level) for level in nodes], "<u4").tobytes(),
     ]
-    for fragment in fragments:
-        parts.append(np.zeros(3, "<u4").tobytes())  # its position: node (0, 0, 0)
-        parts.append(np.array([len(fragment)], "<u4").tobytes())
-    return b"".join(parts), b"".join(fragments)
+    data = []
+    for level in nodes:
+        positions = sorted(level, key=_morton)
+        sizes = []
+        for position in positions:
+            fragment = level[position]
+            encoded = b"" if fragment is None else _encode(draco, *fragment, bits, top, not cut)
+            sizes.append(len(encoded))
+            data.append(encoded)
+        parts.append(np.array(positions, "<u4").reshape(-1, 3).T.copy().tobytes())
+        parts.append(np.array(sizes, "<u4").tobytes())
+    return b"".join(parts), b"".join(data)
+
+
+def _encode(
+    draco, q: np.ndarray, cells: np.ndarray, bits: int, top: float, in_order: bool
+) -> bytes:
+    """One Draco fragment. ``in_order`` keeps the vertices as given: in its own
+    order (its edgebreaker, which compresses best) Draco merges vertices quantized
+    to one position and drops the triangles that become degenerate (2 of the
+    40-label atlas's 2.2 million); cut fragments have merged those already."""
+    return draco.encode(
+        q,
+        cells,
+        quantization_bits=bits,
+        quantization_range=top,
+        quantization_origin=[0.0, 0.0, 0.0],
+        compression_level=7,
+        preserve_order=in_order,
+    )
+
+
+def _morton(position: tuple[int, int, int]) -> int:
+    """The Z-curve key of an octree node, x in the lowest bit (meshes.md)."""
+    key = 0
+    for bit in range(21):
+        for axis in range(3):
+            key |= ((position[axis] >> bit) & 1) << (3 * bit + axis)
+    return key
+
+
+def _cut(
+    vertices: np.ndarray, cells: np.ndarray, axis: int, plane: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Split the triangles that cross the plane ``x[axis] = plane`` (strictly) so
+    that none does, keeping orientation.
+
+    Each crossing edge gets one new vertex exactly on the plane, computed from its
+    ends in increasing index order, so the two triangles beside it share it and
+    the surface stays closed. A triangle with a corner on the plane becomes two,
+    any other crossing one three.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    cells : (C, 3) int64
+
+    Returns
+    -------
+    vertices : (V + N, 3) float64
+    cells : (C', 3) int64
+    """
+    side = np.sign(vertices[:, axis] - plane).astype(np.int8)[cells]  # (C, 3)
+    crossing = (side.min(axis=1) < 0) & (side.max(axis=1) > 0)
+    if not crossing.any():
+        return vertices, cells
+    tri, s = cells[crossing], side[crossing]
+    # rotate each so that corner 0 is the one alone: on the plane, or on its own side
+    zero = s == 0
+    lone = np.where(zero.any(axis=1), np.argmax(zero, axis=1), 0)
+    alone = ~zero.any(axis=1)
+    for j in range(3):  # no corner on the plane: the one whose side the others share not
+        others = [(j + 1) % 3, (j + 2) % 3]
+        pick = alone & (s[:, others[0]] == s[:, others[1]]) & (s[:, j] != s[:, others[0]])
+        lone[pick] = j
+    rows = np.arange(len(tri))[:, None]
+    tri = tri[rows, (lone[:, None] + np.arange(3)) % 3]
+    s = s[rows, (lone[:, None] + np.arange(3)) % 3]
+    # the new vertices, one per crossing edge
+    edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    signs = np.concatenate([s[:, [0, 1]], s[:, [1, 2]], s[:, [2, 0]]])
+    cut = signs[:, 0] * signs[:, 1] < 0
+    pairs = np.sort(edges[cut], axis=1)
+    unique, inverse = np.unique(pairs, axis=0, return_inverse=True)
+    u, w = vertices[unique[:, 0]], vertices[unique[:, 1]]
+    t = (plane - u[:, axis]) / (w[:, axis] - u[:, axis])
+    new = u + t[:, None] * (w - u)
+    new[:, axis] = plane
+    index = np.full(len(edges), -1, np.int64)
+    index[np.flatnonzero(cut)] = len(vertices) + inverse.reshape(-1)
+    n = len(tri)
+    m01, m12, m20 = index[:n], index[n : 2 * n], index[2 * n :]
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    on = s[:, 0] == 0
+    # a corner on the plane: (a, b, m12) and (a, m12, c)
+    two = np.concatenate([np.stack([a, b, m12], 1)[on], np.stack([a, m12, c], 1)[on]])
+    # a alone on its side: (a, m01, m20), (m01, b, c), (m01, c, m20)
+    off = ~on
+    three = np.concatenate(
+        [
+            np.stack([a, m01, m20], 1)[off],
+            np.stack([m01, b, c], 1)[off],
+            np.stack([m01, c, m20], 1)[off],
+        ]
+    )
+    return np.vstack([vertices, new]), np.vstack([cells[~crossing], two, three])
 
 
 def _write_json(path: Path, value: dict) -> None:
