@@ -19,6 +19,10 @@ the peer), beside the best and median times. The pipelines:
   ``contour_labels(boundary_style="all")`` (vtkSurfaceNets3D, 16 iterations; against
   the default), each label's triangles written by numpy and pyvista. Targets 1.0x zmesh,
   0.5x pyvista.
+- ``layer``: the same atlas to a Neuroglancer precomputed layer: ``--format
+  precomputed`` with 1 level of detail, 3, and 3 cut into 64-voxel fragments, against
+  zmesh + cloud-volume writing the single-resolution format (cloud-volume has no
+  multi-resolution writer). No target: the formats differ.
 - ``normals``: a 384^3 float32 gyroid (raw) to binary PLY with and without ``--normals``.
   Target 1.3x.
 - ``ct-bound``: the chest CT (DICOM series, 512x512x64, level 300.5 HU) decimated with
@@ -113,6 +117,38 @@ for label in np.unique(sides):
         used, local = np.unique(these, return_inverse=True)
         mesh = pv.PolyData.from_regular_faces(points[used], local.reshape(-1, 3))
         mesh.save(f"{out}/atlas_label{label}.ply")
+'''
+
+ZMESH_LAYER = '''\
+"""np.load + zmesh + cloud-volume: a Neuroglancer layer of every label's mesh
+(cloud-volume writes the single-resolution format; it has no multi-resolution
+writer, igneous has)."""
+import shutil
+import sys
+
+import numpy as np
+from cloudvolume import CloudVolume
+from cloudvolume.mesh import Mesh
+from zmesh import Mesher
+
+path, out = sys.argv[1:]
+shutil.rmtree(out, ignore_errors=True)  # a fresh layer each round, as isoconvert's -f
+labels = np.load(path).T  # (x, y, z)
+mesher = Mesher((1, 1, 1))
+mesher.mesh(labels, close=True)
+info = CloudVolume.create_new_info(
+    num_channels=1, layer_type="segmentation", data_type="uint8", encoding="raw",
+    resolution=[1, 1, 1], voxel_offset=[0, 0, 0], mesh="mesh", chunk_size=[64, 64, 64],
+    volume_size=list(labels.shape),
+)
+vol = CloudVolume(f"file://{out}", info=info, progress=False)
+vol.commit_info()
+meshes = []
+for label in mesher.ids():
+    if label:
+        m = mesher.get(label, normals=False)
+        meshes.append(Mesh(m.vertices, m.faces, segid=label))
+vol.mesh.put(meshes)
 '''
 
 SKIMAGE_CT_PRINT = '''\
@@ -221,6 +257,29 @@ def atlas_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
     return commands, pairs
 
 
+def layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
+    atlas = tmp / "atlas.npy"
+    if not atlas.exists():
+        np.save(atlas, np.ascontiguousarray(synthetic_atlas().data.T))
+    (tmp / "zmesh_layer.py").write_text(ZMESH_LAYER)
+    base = [exe, "convert", str(atlas), "--labels", "--format", "precomputed", "-f", "-q"]
+    commands = [
+        Command("isoconvert precomputed, 1 level", base + ["--lods", "1", "-o", str(tmp / "l1")]),
+        Command("isoconvert precomputed, 3 levels", base + ["--lods", "3", "-o", str(tmp / "l3")]),
+        Command(
+            "isoconvert precomputed, 3 levels, fragments 64",
+            base + ["--lods", "3", "--fragment-size", "64", "-o", str(tmp / "l3f")],
+        ),
+        Command(
+            "zmesh + cloud-volume script (1 level)",
+            [sys.executable, str(tmp / "zmesh_layer.py"), str(atlas), str(tmp / "zl")],
+        ),
+    ]
+    return commands, [
+        ("isoconvert precomputed, 1 level", "zmesh + cloud-volume script (1 level)", None)
+    ]
+
+
 def normals_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
     raw = tmp / "gyroid_384.raw"
     gyroid(384)().tofile(raw)
@@ -296,6 +355,7 @@ def ct_bound(tmp: Path, exe: str, rounds: int) -> None:
 PIPELINES = {
     "engine": ("engine 256x256x128: largest, smooth 20, decimate 0.9, STL", engine_pipeline),
     "atlas": ("40-label 256^3 atlas: one PLY per label", atlas_pipeline),
+    "layer": ("40-label 256^3 atlas: a Neuroglancer precomputed layer", layer_pipeline),
     "normals": ("gyroid 384^3 float32 -> PLY, with and without --normals", normals_pipeline),
     "ct-print": ("chest CT -> printable STL", ct_print_pipeline),
 }
