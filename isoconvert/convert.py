@@ -96,6 +96,8 @@ class ConvertOptions:
     fragment_size : float or None
         A precomputed layer's octree fragments, in voxels a side (None: one per
         object and level).
+    sharded : bool
+        A precomputed layer's objects in shard files.
     """
 
     read: ReadOptions = field(default_factory=ReadOptions)
@@ -123,6 +125,7 @@ class ConvertOptions:
     label_smoothing: int | None = None
     lods: int = 3
     fragment_size: float | None = None
+    sharded: bool = False
 
     def updated(self, **changes) -> ConvertOptions:
         """A copy with ``changes``; names of :class:`ReadOptions` fields go to

@@ -152,6 +152,7 @@ def convert_labels(
             lods=opts.lods,
             decimate=_bounded,
             chunk=opts.fragment_size,
+            sharded=opts.sharded,
             force=opts.force,
             on_status=on_status,
         )

@@ -30,6 +30,7 @@ CONVERT_ONLY = {
     "series": "batch converts every series of a DICOM folder (a --levels entry may pick one)",
     "lods": "the levels of detail of a precomputed layer, which batch does not write",
     "fragment_size": "the octree fragments of a precomputed layer, which batch does not write",
+    "sharded": "the shard files of a precomputed layer, which batch does not write",
 }
 #: Options only batch has.
 BATCH_ONLY = {

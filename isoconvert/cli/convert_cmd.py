@@ -27,6 +27,7 @@ from .options import (
     QuietOpt,
     ReadArgs,
     RequireOpt,
+    ShardedOpt,
     VerboseOpt,
     _convert_options,
     _grouped,
@@ -76,6 +77,7 @@ def convert(
     labels: LabelArgs = LabelArgs(),
     lods: LodsOpt = 3,
     fragment_size: FragmentSizeOpt = None,
+    sharded: ShardedOpt = False,
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
     _quiet_third_party()
@@ -97,6 +99,7 @@ def convert(
         blocks=memory.blocks(),
         lods=lods,
         fragment_size=fragment_size,
+        sharded=sharded,
     )
     by_label = options.labels is not None
     if not by_label and not level:

@@ -535,6 +535,18 @@ FragmentSizeOpt = Annotated[
 ]
 
 
+#: convert's shard files of --format precomputed
+ShardedOpt = Annotated[
+    bool,
+    _flag(
+        "--sharded",
+        help="Store --format precomputed objects in shard files (neuroglancer_uint64_"
+        "sharded_v1) instead of two files each: for layers of many objects.",
+        rich_help_panel="Output",
+    ),
+]
+
+
 def _convert_options(
     read: ReadArgs,
     extract: ExtractArgs,

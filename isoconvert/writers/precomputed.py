@@ -33,8 +33,11 @@ per axis.
 With ``chunk`` the octree's finest nodes are that many index units a side instead,
 and each level is cut into the nodes it crosses (:func:`_object`, :func:`_cut`).
 
-Not built yet (issue 25): sharding, the legacy single-resolution format,
-block-wise and Dask writing, and the labels' own chunks (``--with-volume``).
+With ``sharded`` the manifests and fragments go into shard files
+(:func:`_write_shards`, the identity hash).
+
+Not built yet (issue 25): the legacy single-resolution format, block-wise and
+Dask writing, and the labels' own chunks (``--with-volume``).
 """
 
 from __future__ import annotations
@@ -169,6 +172,7 @@ def write_precomputed(
     decimate: Callable[[Mesh, float], Mesh] | None = None,
     bits: int = 16,
     chunk: float | None = None,
+    sharded: bool = False,
     force: bool = False,
     on_status: Callable[[str], None] | None = None,
 ) -> Path:
@@ -200,6 +204,9 @@ def write_precomputed(
     chunk : float or None
         The octree's finest nodes, in index units (cubes): an object larger is cut
         into fragments a viewer can load one by one. None: a fragment per level.
+    sharded : bool
+        Store the objects in shard files (``neuroglancer_uint64_sharded_v1``)
+        instead of two files each.
     force : bool
         Replace an existing folder.
     on_status : callable or None
@@ -247,24 +254,92 @@ def write_precomputed(
     with atomic_folder(folder, force) as work:
         (work / "mesh").mkdir()
         _write_json(work / "info", _layer_info(clean, nm, data_type))
-        _write_json(
-            work / "mesh" / "info",
-            {
-                "@type": "neuroglancer_multilod_draco",
-                "vertex_quantization_bits": bits,
-                "transform": [float(x) for x in transform.ravel()],
-                "lod_scale_multiplier": 1.0,
-            },
-        )
+        mesh_info = {
+            "@type": "neuroglancer_multilod_draco",
+            "vertex_quantization_bits": bits,
+            "transform": [float(x) for x in transform.ravel()],
+            "lod_scale_multiplier": 1.0,
+        }
+        spec = _sharding(len(meshes)) if sharded else None
+        if spec is not None:
+            mesh_info["sharding"] = spec
+        _write_json(work / "mesh" / "info", mesh_info)
+        objects = {}
         for segment, mesh in meshes.items():
             _check_mesh(int(segment), mesh)
             index = (np.asarray(mesh.vertices, dtype=np.float64) - origin) @ inverse.T
             full = Mesh(index, np.asarray(mesh.cells, dtype=np.int64))
             levels = [full] + [decimate(full, float(2 ** (k - 1))) for k in range(1, lods)]
             manifest, data = _object(levels, bits, draco, chunk)
-            (work / "mesh" / f"{int(segment)}.index").write_bytes(manifest)
-            (work / "mesh" / f"{int(segment)}").write_bytes(data)
+            if spec is None:
+                (work / "mesh" / f"{int(segment)}.index").write_bytes(manifest)
+                (work / "mesh" / f"{int(segment)}").write_bytes(data)
+            else:
+                objects[int(segment)] = (data, manifest)
+        if spec is not None:
+            _write_shards(work / "mesh", objects, spec)
     return folder
+
+
+def _sharding(objects: int) -> dict:
+    """A sharding specification for ``objects`` segments: the identity hash (segment
+    ids are the labels, spread over the low bits already), about 64 objects per
+    minishard and 64 minishards per shard."""
+    bits = max(0, int(np.ceil(np.log2(max(objects, 1) / 64))))
+    minishard_bits = min(bits, 6)
+    return {
+        "@type": "neuroglancer_uint64_sharded_v1",
+        "preshift_bits": 0,
+        "hash": "identity",
+        "minishard_bits": minishard_bits,
+        "shard_bits": bits - minishard_bits,
+        "minishard_index_encoding": "gzip",
+        "data_encoding": "raw",
+    }
+
+
+def _write_shards(folder: Path, objects: dict[int, tuple[bytes, bytes]], spec: dict) -> None:
+    """The shard files of sharded.md: per shard, the shard index, then each object's
+    fragment data followed by its manifest (the minishard index points at the
+    manifest, as meshes.md asks), then the gzip-encoded minishard indices."""
+    import gzip
+
+    minishards = 1 << spec["minishard_bits"]
+    shards: dict[int, dict[int, list[int]]] = {}
+    for segment in sorted(objects):  # identity hash, no preshift
+        minishard = segment & (minishards - 1)
+        shard = (segment >> spec["minishard_bits"]) & ((1 << spec["shard_bits"]) - 1)
+        shards.setdefault(shard, {}).setdefault(minishard, []).append(segment)
+    digits = max(1, -(-spec["shard_bits"] // 4))
+    for shard, by_minishard in shards.items():
+        body, indices, at = [], [], 0
+        for minishard in range(minishards):
+            ids = by_minishard.get(minishard, [])
+            starts, sizes = [], []
+            for segment in ids:
+                data, manifest = objects[segment]
+                body += [data, manifest]
+                starts.append(at + len(data))
+                sizes.append(len(manifest))
+                at += len(data) + len(manifest)
+            indices.append((ids, starts, sizes))
+        index, tail, place = [], [], at
+        for ids, starts, sizes in indices:
+            if not ids:
+                index.append((place, place))
+                continue
+            starts_, sizes_ = np.array(starts, np.int64), np.array(sizes, np.int64)
+            ends = starts_ + sizes_
+            # ids delta-encoded; starts relative to the end of the chunk before
+            table = np.array(
+                [np.diff(ids, prepend=0), starts_ - np.r_[0, ends[:-1]], sizes_], dtype="<u8"
+            )
+            encoded = gzip.compress(table.tobytes(), mtime=0)
+            index.append((place, place + len(encoded)))
+            tail.append(encoded)
+            place += len(encoded)
+        head = np.array(index, dtype="<u8").tobytes()
+        (folder / f"{shard:0{digits}x}.shard").write_bytes(b"".join([head, *body, *tail]))
 
 
 def _check_mesh(segment: int, mesh: Mesh) -> None:
