@@ -531,3 +531,19 @@ def test_a_sharded_layer_holds_the_same_objects(tmp_path):
             b = shards.mesh.get(int(label), lod=lod)
             b = b[int(label)] if isinstance(b, dict) else b
             assert np.array_equal(a.faces, b.faces) and np.array_equal(a.vertices, b.vertices)
+
+
+def test_the_layer_does_not_depend_on_the_thread_count(tmp_path, labelled, monkeypatch):
+    """Objects are encoded side by side on threads; the files are the same bytes."""
+    _, result = labelled
+    grid = next(iter(result.meshes.values())).info["grid"]
+    for threads in ("1", "2"):
+        monkeypatch.setenv("ISOCONVERT_THREADS", threads)
+        write_precomputed(tmp_path / threads, result.meshes, grid, unit="µm", lods=3,
+                          decimate=_bounded, chunk=8.0)  # fmt: skip
+    one = sorted(p.relative_to(tmp_path / "1") for p in (tmp_path / "1").rglob("*"))
+    two = sorted(p.relative_to(tmp_path / "2") for p in (tmp_path / "2").rglob("*"))
+    assert one == two
+    for name in one:
+        if (tmp_path / "1" / name).is_file():
+            assert (tmp_path / "1" / name).read_bytes() == (tmp_path / "2" / name).read_bytes()

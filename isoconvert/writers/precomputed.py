@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +53,7 @@ from ..atomic import atomic_folder
 from ..errors import FormatError, IsoconvertError, OutputError
 from ..geometry import normalized_grid
 from ..mesh import Mesh
+from ..threads import kernel_threads
 from ..units import meters_per_unit
 
 #: The vertex quantization the format allows.
@@ -264,18 +266,26 @@ def write_precomputed(
         if spec is not None:
             mesh_info["sharding"] = spec
         _write_json(work / "mesh" / "info", mesh_info)
-        objects = {}
         for segment, mesh in meshes.items():
             _check_mesh(int(segment), mesh)
+
+        def encoded(mesh: Mesh) -> tuple[bytes, bytes]:
             index = (np.asarray(mesh.vertices, dtype=np.float64) - origin) @ inverse.T
             full = Mesh(index, np.asarray(mesh.cells, dtype=np.int64))
             levels = [full] + [decimate(full, float(2 ** (k - 1))) for k in range(1, lods)]
-            manifest, data = _object(levels, bits, draco, chunk)
-            if spec is None:
-                (work / "mesh" / f"{int(segment)}.index").write_bytes(manifest)
-                (work / "mesh" / f"{int(segment)}").write_bytes(data)
-            else:
-                objects[int(segment)] = (data, manifest)
+            return _object(levels, bits, draco, chunk)
+
+        objects = {}
+        # objects side by side: the coarser levels' collapses are most of the work,
+        # and their kernels leave the interpreter free
+        with ThreadPoolExecutor(max_workers=kernel_threads() if lods > 1 else 1) as pool:
+            done = pool.map(encoded, meshes.values())
+            for segment, (manifest, data) in zip(meshes, done, strict=True):
+                if spec is None:
+                    (work / "mesh" / f"{int(segment)}.index").write_bytes(manifest)
+                    (work / "mesh" / f"{int(segment)}").write_bytes(data)
+                else:
+                    objects[int(segment)] = (data, manifest)
         if spec is not None:
             _write_shards(work / "mesh", objects, spec)
     return folder
