@@ -3,7 +3,9 @@
 // (non-)degenerate in float32 as in float64 (the bound is derived in
 // precision.py's _candidates); this is the same arithmetic, in the same order,
 // one triangle at a time instead of numpy's block-by-block temporaries, which
-// took 4 ms per 15k-triangle mesh: most of writing 40 label meshes.
+// took 4 ms per 15k-triangle mesh: most of writing 40 label meshes. And before
+// it, which vertices rounding moves at all (moved_by_float32): on a label mesh
+// the few split vertices, so every later test runs on a handful.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 
@@ -65,6 +67,62 @@ void candidates(const double *xyz, i64 nv, const i64 *cells, i64 nt, const i64 *
   for (const auto &f : found) near.insert(near.end(), f.begin(), f.end());
 }
 
+// A float32 position as a key that compares equal for equal positions
+// (-0.0 and 0.0 alike; NaN never reaches it: NaN counts as moved).
+struct Position32 {
+  float x, y, z;
+  bool operator<(const Position32 &o) const {
+    return x < o.x || (x == o.x && (y < o.y || (y == o.y && z < o.z)));
+  }
+  bool operator==(const Position32 &o) const { return x == o.x && y == o.y && z == o.z; }
+};
+
+inline bool moves(const double *p) {
+  // NaN compares unequal to itself: it counts as moved, as numpy's != says
+  return double(float(p[0])) != p[0] || double(float(p[1])) != p[1] ||
+         double(float(p[2])) != p[2];
+}
+
+// The vertices float32 rounding moves, with those that stay where one of them lands
+// (ascending; every vertex when most move), and the cells with a moved corner.
+void moved_by_float32(const double *xyz, i64 nv, const i64 *cells, i64 nc, int corners,
+                      std::vector<i64> &some, std::vector<i64> &touched) {
+  std::vector<unsigned char> moved(static_cast<size_t>(nv));
+  i64 count = 0;
+  for (i64 v = 0; v < nv; ++v) {
+    moved[v] = moves(xyz + 3 * v);
+    count += moved[v];
+  }
+  if (count == 0) return;
+  if (2 * count >= nv) {
+    some.resize(static_cast<size_t>(nv));
+    for (i64 v = 0; v < nv; ++v) some[v] = v;
+  } else {
+    std::vector<Position32> landing;
+    landing.reserve(static_cast<size_t>(count));
+    for (i64 v = 0; v < nv; ++v) {
+      const double *p = xyz + 3 * v;  // + 0.0f: -0.0 lands where 0.0 does
+      if (!moved[v] || std::isnan(p[0] + p[1] + p[2])) continue;  // no vertex stays at NaN
+      landing.push_back({float(p[0]) + 0.0f, float(p[1]) + 0.0f, float(p[2]) + 0.0f});
+    }
+    std::sort(landing.begin(), landing.end());
+    for (i64 v = 0; v < nv; ++v) {
+      bool keep = moved[v];
+      if (!keep) {
+        const double *p = xyz + 3 * v;
+        const Position32 q{float(p[0]) + 0.0f, float(p[1]) + 0.0f, float(p[2]) + 0.0f};
+        keep = std::binary_search(landing.begin(), landing.end(), q);
+      }
+      if (keep) some.push_back(v);
+    }
+  }
+  for (i64 c = 0; c < nc; ++c) {
+    bool any = false;
+    for (int k = 0; k < corners; ++k) any |= moved[cells[corners * c + k]] != 0;
+    if (any) touched.push_back(c);
+  }
+}
+
 }  // namespace
 
 void bind_precision(nb::module_ &m) {
@@ -94,4 +152,31 @@ void bind_precision(nb::module_ &m) {
       },
       "vertices"_a, "cells"_a, "group"_a, "threads"_a,
       "Triangles (ascending) whose degeneracy rounding the vertices to float32 could change.");
+  m.def(
+      "moved_by_float32",
+      [](Doubles vertices, Int64s cells) {
+        const i64 nv = vertices.ndim() == 2 && vertices.shape(1) == 3 ? i64(vertices.shape(0))
+                                                                        : -1;
+        const int corners = cells.ndim() == 2 ? int(cells.shape(1)) : 0;
+        if (nv < 0 || (corners != 2 && corners != 3)) {
+          throw std::invalid_argument("moved_by_float32: vertices (V, 3), cells (C, 3) or (C, 2)");
+        }
+        const i64 nc = i64(cells.shape(0));
+        const i64 *c = cells.data();
+        for (i64 k = 0; k < corners * nc; ++k) {
+          if (c[k] < 0 || c[k] >= nv) {
+            throw std::invalid_argument("moved_by_float32: a cell refers to no vertex");
+          }
+        }
+        std::vector<i64> some, touched;
+        {
+          nb::gil_scoped_release unlocked;
+          moved_by_float32(vertices.data(), nv, c, nc, corners, some, touched);
+        }
+        return nb::make_tuple(give(std::move(some)), give(std::move(touched)));
+      },
+      "vertices"_a, "cells"_a,
+      "(vertices, cells): ascending indices of the vertices rounding to float32 moves, with\n"
+      "those that stay where one of them lands (every vertex when most move; none when none\n"
+      "moves), and of the cells with a moved corner.");
 }

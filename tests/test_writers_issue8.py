@@ -365,6 +365,42 @@ def test_float32_loss_agrees_with_the_shared_definition(seed, offset, scale):
     assert (loss.merged_vertices, loss.degenerate_cells) == brute_force_loss(vertices, cells)
 
 
+@settings(max_examples=150, deadline=None)
+@given(
+    st.integers(0, 2**32 - 1),
+    st.sampled_from([0.0, 1e3, 5e6, -3e7]),
+    st.sampled_from([2, 3]),
+)
+def test_float32_loss_with_few_moved_vertices_agrees_with_the_shared_definition(
+    seed, offset, corners
+):
+    """Most vertices already float32 values (a label mesh's voxel corners), a few
+    moved off them by less than half a float32 step: they land on a vertex that
+    stays, on each other, or alone, so only they and where they land are tested."""
+    from isoconvert.writers.precision import float32_loss
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(12, 60))
+    vertices = np.float32(offset) + rng.integers(0, 8, (n, 3)).astype(np.float32) * np.float32(0.5)
+    vertices = vertices.astype(np.float64)
+    step = np.spacing(np.abs(vertices).astype(np.float32)).astype(np.float64)
+    few = rng.choice(n, int(rng.integers(1, n // 3)), replace=False)
+    vertices[few] += step[few] * rng.uniform(-0.45, 0.45, (len(few), 3))
+    # one moved vertex lands on another (stay or moved) vertex's float32 position
+    vertices[few[0]] = vertices[rng.integers(0, n)].astype(np.float32) + step[few[0]] * 0.3
+    cells = rng.integers(0, n, (80, corners))
+    loss = float32_loss(vertices, cells)
+    merged, degenerate = brute_force_loss(vertices, cells) if corners == 3 else (None, None)
+    if corners == 2:
+        rounded = vertices.astype(np.float32).astype(np.float64)
+        merged = len(np.unique(vertices, axis=0)) - len(np.unique(rounded, axis=0))
+        a, b = cells[:, 0], cells[:, 1]
+        degenerate = int(
+            ((rounded[a] == rounded[b]).all(axis=1) & (vertices[a] != vertices[b]).any(axis=1)).sum()
+        )
+    assert (loss.merged_vertices, loss.degenerate_cells) == (merged, degenerate)
+
+
 # --- 4. what was written, for the report ----------------------------------------------------
 
 

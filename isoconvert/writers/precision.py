@@ -7,9 +7,11 @@ not. :func:`float32_loss` counts both, with the project's one definition of a
 degenerate triangle (:mod:`isoconvert.geometry`: a repeated position, or flat).
 
 Speed: the shared predicate gathers every triangle's corners twice over and
-would cost seconds on millions of triangles. It is evaluated only on the few
-triangles whose verdict float32 rounding could change; a cheaper bound, a
-compiled pass over the triangles, proves the others safe (see :func:`_candidates`).
+would cost seconds on millions of triangles. A compiled pass first finds the
+vertices rounding moves at all (on a label mesh, the few split vertices); only
+they, the vertices where they land and the triangles they touch are tested. Of
+those triangles, the predicate sees only the few whose verdict rounding could
+change; a cheaper bound proves the others safe (see :func:`_candidates`).
 """
 
 from __future__ import annotations
@@ -88,50 +90,76 @@ def float32_loss(
         flat, :func:`isoconvert.geometry.flat_triangles`); a segment when its
         two ends are distinct in float64 and equal in float32.
     """
-    v64 = np.asarray(vertices, dtype=np.float64)
-    cells = np.asarray(cells, dtype=np.int64)
-    with np.errstate(over="ignore", invalid="ignore"):
-        v32 = v64.astype(np.float32)
-    if not (v32 != v64).any():  # already float32 values (or NaN, which rounding keeps)
+    from .. import _native
+
+    v64 = np.ascontiguousarray(vertices, dtype=np.float64)
+    cells = np.ascontiguousarray(cells, dtype=np.int64)
+    # Rounding changes only the "moved" vertices: only they can merge, overflow or
+    # turn a cell degenerate, so the exact tests below see them, the vertices that
+    # stay where one of them lands, and the cells with a moved corner. On a label
+    # mesh that is the few split vertices of thousands.
+    some, touched = _native.moved_by_float32(v64, cells)
+    if len(some) == 0:  # already float32 values
         return Float32Loss()
-    overflow = int((np.isfinite(v64).all(axis=1) & ~np.isfinite(v32).all(axis=1)).sum())
-    r32 = v32.astype(np.float64)
-    merged, group = _merges(v64, r32)
+    sub64 = v64[some]
+    with np.errstate(over="ignore", invalid="ignore"):
+        sub32 = sub64.astype(np.float32).astype(np.float64)
+    overflow = int((np.isfinite(sub64).all(axis=1) & ~np.isfinite(sub32).all(axis=1)).sum())
+    merged, group = _merges(sub64, sub32, some, len(v64))
     if not count_degenerate and (merged or overflow):
         return Float32Loss(merged, None, overflow)
+    cells = cells[touched]  # every other cell keeps its corners, so its verdict
     if cells.shape[1] == 2:
         degenerate = 0
         if group is not None:
             a, b = cells[:, 0], cells[:, 1]
             degenerate = int(((group[a] == group[b]) & (v64[a] != v64[b]).any(axis=1)).sum())
         return Float32Loss(merged, degenerate, overflow)
-    candidates = _candidates(v64, cells, group)
+    candidates = cells[_candidates(v64, cells, group)]
+    if not len(candidates):
+        return Float32Loss(merged, 0, overflow)
+    with np.errstate(over="ignore", invalid="ignore"):
+        r32 = v64.astype(np.float32).astype(np.float64)
     degenerate = 0
     for start in range(0, len(candidates), _BLOCK):
-        sub = cells[candidates[start : start + _BLOCK]]
+        sub = candidates[start : start + _BLOCK]
         degenerate += int((_degenerate(r32, sub) & ~_degenerate(v64, sub)).sum())
     return Float32Loss(merged, degenerate, overflow)
 
 
-def _merges(v64: np.ndarray, r32: np.ndarray) -> tuple[int, np.ndarray | None]:
+def _merges(
+    sub64: np.ndarray, sub32: np.ndarray, some: np.ndarray, n_vertices: int
+) -> tuple[int, np.ndarray | None]:
     """How many distinct float64 positions float32 merges, and (when it merges
     any) the float32 position group of each vertex, (V,) int64: the distinct
     positions counted by the report's compiled hash kernel
     (:func:`isoconvert.graph.merge_positions`), -0.0 and 0.0 as one.
 
+    Only the vertices ``some`` need counting: every float32 position that holds
+    two float64 ones holds a moved vertex, and ``some`` has all the vertices at
+    such a position (a vertex elsewhere stays its own group, alone or with
+    vertices at the same float64 position).
+
     Parameters
     ----------
-    v64 : (V, 3) float64
-    r32 : (V, 3) float64
-        ``v64`` rounded to float32.
+    sub64 : (K, 3) float64
+        The positions of the vertices ``some``.
+    sub32 : (K, 3) float64
+        ``sub64`` rounded to float32.
+    some : (K,) int64
+        Their indices among the mesh's ``n_vertices``, ascending.
     """
-    if len(v64) < 2:
+    if len(sub64) < 2:
         return 0, None
-    rounded = merge_positions(r32, dtype=np.int64)
-    if rounded.unique == len(v64):  # the usual case: every float32 position distinct
+    rounded = merge_positions(sub32, dtype=np.int64)
+    if rounded.unique == len(sub64):  # the usual case: every float32 position distinct
         return 0, None
-    merged = merge_positions(v64, dtype=np.int64).unique - rounded.unique
-    return (merged, rounded.rep) if merged else (0, None)
+    merged = merge_positions(sub64, dtype=np.int64).unique - rounded.unique
+    if not merged:
+        return 0, None
+    group = np.arange(n_vertices, dtype=np.int64)
+    group[some] = some[rounded.rep]
+    return merged, group
 
 
 def _degenerate(vertices: np.ndarray, cells: np.ndarray) -> np.ndarray:
