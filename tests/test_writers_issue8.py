@@ -395,9 +395,8 @@ def test_float32_loss_with_few_moved_vertices_agrees_with_the_shared_definition(
         rounded = vertices.astype(np.float32).astype(np.float64)
         merged = len(np.unique(vertices, axis=0)) - len(np.unique(rounded, axis=0))
         a, b = cells[:, 0], cells[:, 1]
-        degenerate = int(
-            ((rounded[a] == rounded[b]).all(axis=1) & (vertices[a] != vertices[b]).any(axis=1)).sum()
-        )
+        same = (rounded[a] == rounded[b]).all(axis=1)
+        degenerate = int((same & (vertices[a] != vertices[b]).any(axis=1)).sum())
     assert (loss.merged_vertices, loss.degenerate_cells) == (merged, degenerate)
 
 
