@@ -129,8 +129,10 @@ Merged merge_positions(const double *xyz, i64 n, int threads, u64 *key, I *rep) 
   while (bits < 24 && (i64(1) << (bits + 11)) < n) ++bits;
   const i64 nb = i64(1) << bits;
   auto bucket = [bits](u64 h) -> i64 { return bits ? i64(h >> (64 - bits)) : 0; };
-  // parts: fixed slices of the vertices, one histogram each
-  const i64 parts = std::max<i64>(1, std::min<i64>({i64(threads), i64(16), n}));
+  // parts: fixed slices of the vertices, one histogram each; a slice of less than
+  // 32k vertices is not worth a thread (the float32 checks of label meshes hash a
+  // few hundred vertices, where starting threads cost more than the hashing)
+  const i64 parts = std::max<i64>(1, std::min<i64>({i64(threads), i64(16), (n + 32767) / 32768}));
   auto slice = [n, parts](i64 p) { return n * p / parts; };
   std::vector<i64> at(static_cast<size_t>(parts * nb), 0);
   // this pass reads every coordinate: it also finds the largest finite one,
