@@ -91,13 +91,18 @@ class ConvertOptions:
         Labels: the value of no label.
     label_smoothing : int or None
         Labels: Surface Nets relaxation iterations (None: 16; 0: the voxel faces).
-    lods : int
-        Levels of detail of a precomputed layer (1: the meshes as extracted).
+    lods : int or None
+        Levels of detail of a precomputed layer (1: the meshes as extracted;
+        None: 3, or 1 with ``legacy_mesh``).
     fragment_size : float or None
         A precomputed layer's octree fragments, in voxels a side (None: one per
         object and level).
     sharded : bool
         A precomputed layer's objects in shard files.
+    legacy_mesh : bool
+        A precomputed layer's meshes in the legacy single-resolution format.
+    with_volume : bool
+        A precomputed layer also holds the labels' voxels.
     """
 
     read: ReadOptions = field(default_factory=ReadOptions)
@@ -123,9 +128,16 @@ class ConvertOptions:
     single_file: bool = False
     background: int = 0
     label_smoothing: int | None = None
-    lods: int = 3
+    lods: int | None = None
     fragment_size: float | None = None
     sharded: bool = False
+    legacy_mesh: bool = False
+    with_volume: bool = False
+
+    @property
+    def layer_lods(self) -> int:
+        """The precomputed layer's levels of detail, the default resolved."""
+        return self.lods if self.lods is not None else (1 if self.legacy_mesh else 3)
 
     def updated(self, **changes) -> ConvertOptions:
         """A copy with ``changes``; names of :class:`ReadOptions` fields go to

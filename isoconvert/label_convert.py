@@ -17,6 +17,7 @@ from .post.pipeline import EmptyMeshError, post_process
 from .volume import Volume
 from .writers import check_attributes, output_format
 from .writers.precomputed import check_layer, data_type_for, write_precomputed
+from .writers.precomputed_volume import volume_data_type
 from .writers.stored import write_mesh
 
 
@@ -78,12 +79,16 @@ def convert_labels(
             "neither: leave them out with --labels"
         )
     post = replace(opts.post, close=False, smooth=0)  # label surfaces are closed and smoothed
+    if (opts.with_volume or opts.legacy_mesh) and not writer.layer:
+        flag = "--with-volume" if opts.with_volume else "--legacy-mesh"
+        raise IsoconvertError(f"{flag} is an option of --format precomputed")
     if writer.layer:
         if opts.single_file:
             raise IsoconvertError(
                 f"{writer.name} is a layer of every label already; leave out --single-file"
             )
-        check_layer(output, opts.force, opts.lods, [input], opts.fragment_size)
+        check_layer(output, opts.force, opts.layer_lods, [input], opts.fragment_size,
+                    sharded=opts.sharded, legacy=opts.legacy_mesh)  # fmt: skip
     elif opts.single_file:
         check_output(output, opts.force)
         check_attributes(writer, output, labels=True)
@@ -119,12 +124,16 @@ def convert_labels(
         path = write_mesh(mesh, output, format=writer.name, ascii=opts.ascii, force=opts.force)
         return [ConvertResult(volume, mesh, path, writer.name, opts.ascii)]
     outputs = (
-        [Path(output) / "mesh" / str(label) for label in surfaces.labels]
+        [
+            Path(output) / "mesh" / _layer_object(label, opts.legacy_mesh)
+            for label in surfaces.labels
+        ]
         if writer.layer
         else label_outputs(output, surfaces.labels)
     )
     if writer.layer:
-        check_layer(output, opts.force, opts.lods, volume.files, opts.fragment_size)
+        check_layer(output, opts.force, opts.layer_lods, volume.files, opts.fragment_size,
+                    sharded=opts.sharded, legacy=opts.legacy_mesh)  # fmt: skip
     else:
         for path in outputs:  # every name is checked before the first file is written
             check_output(path, opts.force, inputs=volume.files)
@@ -143,16 +152,22 @@ def convert_labels(
     if writer.layer:
         progress("writing")
         grid = surfaces.combined.info["grid"]
+        largest = max(surfaces.labels)
+        if opts.with_volume:  # every label of the volume is stored, not only those meshed
+            largest = max(largest, int(surfaces.value_range[1]))
         write_precomputed(
             output,
             dict(zip(surfaces.labels, meshes, strict=True)),
             grid,
             unit=volume.unit,
-            data_type=data_type_for(max(surfaces.labels)),
-            lods=opts.lods,
+            data_type=volume_data_type(largest) if opts.with_volume else data_type_for(largest),
+            lods=opts.layer_lods,
             decimate=_bounded,
             chunk=opts.fragment_size,
             sharded=opts.sharded,
+            legacy=opts.legacy_mesh,
+            volume=volume if opts.with_volume else None,
+            background=opts.background,
             force=opts.force,
             on_status=on_status,
         )
@@ -174,6 +189,11 @@ def convert_labels(
             )  # fmt: skip
         )
     return results
+
+
+def _layer_object(label: int, legacy: bool) -> str:
+    """The file of a layer's object: its fragments (multi-resolution) or manifest (legacy)."""
+    return f"{label}:0" if legacy else str(label)
 
 
 def _bounded(mesh, bound: float):

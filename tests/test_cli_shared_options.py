@@ -31,6 +31,8 @@ CONVERT_ONLY = {
     "lods": "the levels of detail of a precomputed layer, which batch does not write",
     "fragment_size": "the octree fragments of a precomputed layer, which batch does not write",
     "sharded": "the shard files of a precomputed layer, which batch does not write",
+    "legacy_mesh": "the mesh format of a precomputed layer, which batch does not write",
+    "with_volume": "the label voxels of a precomputed layer, which batch does not write",
 }
 #: Options only batch has.
 BATCH_ONLY = {

@@ -19,6 +19,7 @@ from .options import (
     ForceOpt,
     FragmentSizeOpt,
     LabelArgs,
+    LegacyMeshOpt,
     LevelOpt,
     LodsOpt,
     MemoryArgs,
@@ -29,6 +30,7 @@ from .options import (
     RequireOpt,
     ShardedOpt,
     VerboseOpt,
+    WithVolumeOpt,
     _convert_options,
     _grouped,
 )
@@ -75,9 +77,11 @@ def convert(
     post: PostArgs = PostArgs(),
     memory: MemoryArgs = MemoryArgs(),
     labels: LabelArgs = LabelArgs(),
-    lods: LodsOpt = 3,
+    lods: LodsOpt = None,
     fragment_size: FragmentSizeOpt = None,
     sharded: ShardedOpt = False,
+    legacy_mesh: LegacyMeshOpt = False,
+    with_volume: WithVolumeOpt = False,
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
     _quiet_third_party()
@@ -100,6 +104,8 @@ def convert(
         lods=lods,
         fragment_size=fragment_size,
         sharded=sharded,
+        legacy_mesh=legacy_mesh,
+        with_volume=with_volume,
     )
     by_label = options.labels is not None
     if not by_label and not level:

@@ -514,10 +514,11 @@ def _grouped(*omit: str):
 
 #: convert's levels of detail of --format precomputed (batch writes no layers)
 LodsOpt = Annotated[
-    int,
+    int | None,
     typer.Option(
         help="Levels of detail of --format precomputed: 1 is the mesh as extracted, "
-        "level k decimated to within 2^(k-1) voxels (needs isoconvert\\[simplify]).",
+        "level k decimated to within 2^(k-1) voxels (needs isoconvert\\[simplify]); "
+        "default 3 (1 with --legacy-mesh).",
         rich_help_panel="Output",
     ),
 ]
@@ -542,6 +543,30 @@ ShardedOpt = Annotated[
         "--sharded",
         help="Store --format precomputed objects in shard files (neuroglancer_uint64_"
         "sharded_v1) instead of two files each: for layers of many objects.",
+        rich_help_panel="Output",
+    ),
+]
+
+
+#: convert's legacy single-resolution meshes of --format precomputed
+LegacyMeshOpt = Annotated[
+    bool,
+    _flag(
+        "--legacy-mesh",
+        help="Write --format precomputed meshes in the legacy single-resolution format "
+        "(neuroglancer_legacy_mesh) for tools that read no other: one level, no shards.",
+        rich_help_panel="Output",
+    ),
+]
+
+
+#: convert's label voxels in a --format precomputed layer
+WithVolumeOpt = Annotated[
+    bool,
+    _flag(
+        "--with-volume",
+        help="Also write the labels themselves into the --format precomputed layer "
+        "(compressed_segmentation chunks), so that one folder opens with voxels and meshes.",
         rich_help_panel="Output",
     ),
 ]

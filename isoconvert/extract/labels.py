@@ -167,6 +167,8 @@ class LabelMeshes:
     unresolved_outside : int
         The same for the surface of the background (and of labels not
         extracted), which only a ``--single-file`` mesh's report judges.
+    value_range : (float, float)
+        The smallest and largest sample of the volume (labels and background).
     """
 
     meshes: dict[int, Mesh]
@@ -178,6 +180,7 @@ class LabelMeshes:
     split_vertices: int = 0
     unresolved: int = 0
     unresolved_outside: int = 0
+    value_range: tuple[float, float] = (0.0, 0.0)
 
     @property
     def labels(self) -> list[int]:
@@ -280,6 +283,7 @@ def label_surfaces(
         split_vertices=int(split),
         unresolved=int(unresolved),
         unresolved_outside=int(outside),
+        value_range=(vmin, vmax),
     )
     for index, label in enumerate(wanted.tolist()):
         f0, f1 = face_offsets[index], face_offsets[index + 1]

@@ -36,8 +36,20 @@ and each level is cut into the nodes it crosses (:func:`_object`, :func:`_cut`).
 With ``sharded`` the manifests and fragments go into shard files
 (:func:`_write_shards`, the identity hash).
 
-Not built yet (issue 25): the legacy single-resolution format, block-wise and
-Dask writing, and the labels' own chunks (``--with-volume``).
+With ``legacy`` the meshes are in the legacy single-resolution format instead
+(``neuroglancer_legacy_mesh``, for tools that read no other): per object a JSON
+manifest ``<id>:0`` naming one fragment ``<id>:0:0``, which holds the vertex count,
+the vertices as float32 nanometres and the triangles as uint32, one level, not
+sharded.
+
+With ``volume`` the layer also holds the labels' voxels
+(:mod:`isoconvert.writers.precomputed_volume`). A precomputed volume has no origin
+or direction: voxel (i, j, k) fills ``[i, i + 1) x resolution`` per axis. The
+meshes then go to that same frame (index coordinates plus half a voxel, times the
+resolution), so that each surface lies on its voxels in the viewer; the volume's
+origin and direction are not stored (a note says so where they are not trivial).
+
+Not built yet (issue 25): block-wise and Dask writing.
 """
 
 from __future__ import annotations
@@ -55,6 +67,8 @@ from ..geometry import normalized_grid
 from ..mesh import Mesh
 from ..threads import kernel_threads
 from ..units import meters_per_unit
+from ..volume import Volume
+from .precomputed_volume import volume_scale, write_chunks
 
 #: The vertex quantization the format allows.
 QUANTIZATION_BITS = (10, 16)
@@ -89,9 +103,13 @@ def check_layer(
     lods: int,
     inputs: Sequence[str | Path] = (),
     chunk: float | None = None,
+    *,
+    sharded: bool = False,
+    legacy: bool = False,
 ) -> None:
     """Fail before any work when a layer cannot be written: DracoPy or (for more
-    than one level of detail) meshoptimizer missing, or the folder taken.
+    than one level of detail) meshoptimizer missing, options the legacy format
+    cannot hold, or the folder taken.
 
     Raises
     ------
@@ -101,9 +119,11 @@ def check_layer(
         ``folder`` exists (without ``force``), is not a folder, its parent is
         missing, or it holds one of ``inputs`` (replacing it would delete them).
     """
-    _dracopy()
     _check_lods(lods)
     _check_chunk(chunk)
+    _check_legacy(legacy, lods, chunk, sharded)
+    if not legacy:
+        _dracopy()
     if lods > 1:
         try:
             import meshoptimizer  # noqa: F401
@@ -130,6 +150,14 @@ def check_layer(
                 )
 
 
+def _check_legacy(legacy: bool, lods: int, chunk: float | None, sharded: bool) -> None:
+    if legacy and (lods > 1 or chunk is not None or sharded):
+        raise IsoconvertError(
+            "precomputed: the legacy mesh format has one level of detail, one fragment per "
+            "object and no shards: leave out --lods, --fragment-size and --sharded with it"
+        )
+
+
 def _check_chunk(chunk) -> None:
     if chunk is not None and not (np.isfinite(chunk) and chunk >= 1):
         raise IsoconvertError(f"precomputed: fragments must be 1 voxel a side or more, got {chunk}")
@@ -140,7 +168,9 @@ def _check_lods(lods) -> None:
         raise IsoconvertError(f"precomputed: levels of detail must be 1 or more, got {lods!r}")
 
 
-def layer_transform(grid: dict, unit: str | None) -> tuple[np.ndarray, float]:
+def layer_transform(
+    grid: dict, unit: str | None, voxel_frame: bool = False
+) -> tuple[np.ndarray, float]:
     """The stored-model-to-nanometre transform of a volume's index space.
 
     Parameters
@@ -149,6 +179,10 @@ def layer_transform(grid: dict, unit: str | None) -> tuple[np.ndarray, float]:
         ``shape``, ``origin``, ``affine`` (index offsets to world offsets).
     unit : str or None
         The volume's length unit; None or an unknown name counts as nanometres.
+    voxel_frame : bool
+        The frame of the layer's own voxels instead of the world: sample (i, j, k)
+        at the centre of voxel ``[i, i + 1) x resolution`` (Neuroglancer's), the
+        resolution being the spacing along each index axis; no origin, no rotation.
 
     Returns
     -------
@@ -159,6 +193,9 @@ def layer_transform(grid: dict, unit: str | None) -> tuple[np.ndarray, float]:
     per = meters_per_unit(unit)
     nm = 1.0 if per is None else per * 1e9
     affine = np.asarray(grid["affine"], dtype=np.float64) * nm
+    if voxel_frame:
+        resolution = np.linalg.norm(affine, axis=0)
+        return np.column_stack([np.diag(resolution), 0.5 * resolution]), nm
     origin = np.asarray(grid["origin"], dtype=np.float64) * nm
     return np.column_stack([affine, origin]), nm
 
@@ -175,6 +212,9 @@ def write_precomputed(
     bits: int = 16,
     chunk: float | None = None,
     sharded: bool = False,
+    legacy: bool = False,
+    volume: Volume | None = None,
+    background: int = 0,
     force: bool = False,
     on_status: Callable[[str], None] | None = None,
 ) -> Path:
@@ -209,6 +249,14 @@ def write_precomputed(
     sharded : bool
         Store the objects in shard files (``neuroglancer_uint64_sharded_v1``)
         instead of two files each.
+    legacy : bool
+        The legacy single-resolution mesh format (one level, one fragment per
+        object, not sharded).
+    volume : Volume or None
+        Also store this label volume's voxels (the one the meshes came from),
+        compressed_segmentation chunks; ``data_type`` is then uint32 or uint64.
+    background : int
+        The label of ``volume`` stored as 0 (no segment).
     force : bool
         Replace an existing folder.
     on_status : callable or None
@@ -226,13 +274,14 @@ def write_precomputed(
     OutputError
         The folder exists (without ``force``) or cannot be written.
     """
-    draco = _dracopy()
+    draco = None if legacy else _dracopy()
     if bits not in QUANTIZATION_BITS:
         raise IsoconvertError(f"precomputed: quantization bits must be 10 or 16, got {bits}")
     _check_lods(lods)
     _check_chunk(chunk)
     if lods > 1 and decimate is None:
         raise IsoconvertError("precomputed: levels of detail above 0 need a decimate function")
+    _check_legacy(legacy, lods, chunk, sharded)
     if data_type not in _DATA_TYPES:
         raise IsoconvertError(
             f"precomputed: labels of type {data_type} cannot be a segmentation; "
@@ -247,15 +296,37 @@ def write_precomputed(
     folder = Path(folder)
     if folder.exists() and not force:
         raise OutputError(f"{folder} exists; pass --force to replace it")
-    transform, nm = layer_transform(clean, unit)
+    transform, nm = layer_transform(clean, unit, voxel_frame=volume is not None)
     if meters_per_unit(unit) is None and on_status:
         on_status("note: the volume's unit is unknown; the layer takes one unit as 1 nm")
+    if volume is not None and on_status and not _axis_aligned_at_zero(clean):
+        on_status(
+            "note: a precomputed volume has no origin or direction; the layer's voxels and "
+            "meshes are in the grid's own frame (voxel 0 at 0 nm, axes as stored)"
+        )
     inverse = np.linalg.inv(np.asarray(clean["affine"], dtype=np.float64))
     origin = np.asarray(clean["origin"], dtype=np.float64)
 
+    for segment, mesh in meshes.items():
+        _check_mesh(int(segment), mesh)
+    if volume is not None and data_type not in ("uint32", "uint64"):
+        raise IsoconvertError(
+            f"precomputed: compressed_segmentation voxels are uint32 or uint64, not {data_type}"
+        )
+
     with atomic_folder(folder, force) as work:
         (work / "mesh").mkdir()
-        _write_json(work / "info", _layer_info(clean, nm, data_type))
+        info = _layer_info(clean, nm, data_type)
+        if volume is not None:
+            scale = volume_scale(info["scales"][0]["size"], info["scales"][0]["resolution"])
+            info["scales"] = [scale]
+            write_chunks(work / scale["key"], volume, background, data_type)
+        _write_json(work / "info", info)
+        if legacy:
+            _write_json(work / "mesh" / "info", {"@type": "neuroglancer_legacy_mesh"})
+            for segment, mesh in meshes.items():
+                _write_legacy(work / "mesh", int(segment), mesh, origin, inverse, transform)
+            return folder
         mesh_info = {
             "@type": "neuroglancer_multilod_draco",
             "vertex_quantization_bits": bits,
@@ -266,8 +337,6 @@ def write_precomputed(
         if spec is not None:
             mesh_info["sharding"] = spec
         _write_json(work / "mesh" / "info", mesh_info)
-        for segment, mesh in meshes.items():
-            _check_mesh(int(segment), mesh)
 
         def encoded(mesh: Mesh) -> tuple[bytes, bytes]:
             index = (np.asarray(mesh.vertices, dtype=np.float64) - origin) @ inverse.T
@@ -289,6 +358,38 @@ def write_precomputed(
         if spec is not None:
             _write_shards(work / "mesh", objects, spec)
     return folder
+
+
+def _axis_aligned_at_zero(grid: dict) -> bool:
+    """Whether a grid's world frame is its voxel frame already: origin 0, no rotation."""
+    affine = np.asarray(grid["affine"], dtype=np.float64)
+    return not np.any(grid["origin"]) and np.array_equal(affine, np.diag(np.diag(affine)))
+
+
+def _write_legacy(
+    folder: Path,
+    segment: int,
+    mesh: Mesh,
+    origin: np.ndarray,
+    inverse: np.ndarray,
+    transform: np.ndarray,
+) -> None:
+    """One object in the legacy format: its manifest ``<id>:0`` and its one fragment
+    ``<id>:0:0`` (vertex count, float32 nanometres in the layer's frame, uint32
+    triangles, all little-endian)."""
+    index = (np.asarray(mesh.vertices, dtype=np.float64) - origin) @ inverse.T
+    nm = index @ transform[:, :3].T + transform[:, 3]
+    fragment = f"{segment}:0:0"
+    _write_json(folder / f"{segment}:0", {"fragments": [fragment]})
+    (folder / fragment).write_bytes(
+        b"".join(
+            [
+                np.uint32(len(nm)).astype("<u4").tobytes(),
+                nm.astype("<f4").tobytes(),
+                np.asarray(mesh.cells).astype("<u4").tobytes(),
+            ]
+        )
+    )
 
 
 def _sharding(objects: int) -> dict:
