@@ -281,9 +281,9 @@ def convert_levels(
     opts = (options or ConvertOptions()).updated(**changes)
     progress = on_progress or (lambda stage: None)
     if opts.format and WRITERS.get(opts.format).layer:
-        from .writers.precomputed import LAYER_ONLY
-
-        raise FormatError(LAYER_ONLY)
+        return _convert_levels_to_layer(
+            input, output, levels, opts, on_status, progress, also_writes
+        )
     outputs = level_outputs(output, levels)
     for path in outputs:  # first: a folder given as -o is "a folder", not a format
         check_output(path, opts.force)
@@ -308,6 +308,75 @@ def convert_levels(
         _extract_and_write(volume, value_volume, level, path, writer, opts, on_status, progress)
         for level, path in zip(levels, outputs, strict=True)
     ]
+
+
+def _convert_levels_to_layer(
+    input: str | Path,
+    output: str | Path,
+    levels: Sequence[float | str],
+    opts: ConvertOptions,
+    on_status: Callable[[str], None] | None,
+    progress: Callable[[str], None],
+    also_writes: Sequence[str | Path],
+) -> list[ConvertResult]:
+    """:func:`convert_levels` into one precomputed layer: level n (in the order
+    given) is the layer's object n + 1, all written once every level is extracted."""
+    from .writers.precomputed import check_layer, data_type_for, write_precomputed
+
+    writer = WRITERS.get(opts.format)
+    if opts.normals or opts.values is not None or opts.with_volume:
+        flag = "--normals" if opts.normals else "--values" if opts.values else "--with-volume"
+        why = "the labels' voxels" if opts.with_volume else "vertex attributes"
+        raise FormatError(
+            f"{flag}: a precomputed layer of isosurfaces holds no {why}; leave it out"
+        )
+    level_outputs(output, levels)  # the same level twice is an error here too
+    check_layer(output, opts.force, opts.layer_lods, [input], opts.fragment_size,
+                sharded=opts.sharded, legacy=opts.legacy_mesh)  # fmt: skip
+    refuse_shared([output, *also_writes])
+    for path in also_writes:
+        refuse_inputs(path, [input] if Path(input).is_file() else [])
+    progress("reading")
+    volume = read_input(input, opts)
+    opts.post.check_method(opts.method or default_method(volume))
+    check_layer(output, opts.force, opts.layer_lods, volume.files, opts.fragment_size,
+                sharded=opts.sharded, legacy=opts.legacy_mesh)  # fmt: skip
+    refuse_outputs_read(also_writes, volume)
+    if len(levels) > 1 and volume.grid is not None and volume.grid.nbytes <= opts.blocks.budget:
+        volume = _in_memory(volume)
+    meshes, extracted = {}, {}
+    for n, level in enumerate(levels, start=1):
+        meshes[n], extracted[n] = _extract(volume, level, opts, on_status, progress)
+    progress("writing")
+    grid = meshes[1].info["grid"]
+    write_precomputed(
+        output,
+        meshes,
+        grid,
+        unit=volume.unit,
+        data_type=data_type_for(len(levels)),
+        lods=opts.layer_lods,
+        decimate=bounded_collapse,
+        chunk=opts.fragment_size,
+        sharded=opts.sharded,
+        legacy=opts.legacy_mesh,
+        force=opts.force,
+        on_status=on_status,
+    )
+    name = (lambda n: f"{n}:0") if opts.legacy_mesh else str
+    return [
+        ConvertResult(
+            volume, meshes[n], Path(output) / "mesh" / name(n), writer.name, False, extracted[n]
+        )
+        for n in meshes
+    ]
+
+
+def bounded_collapse(mesh: Mesh, bound: float) -> Mesh:
+    """A precomputed layer's coarser level: the bounded collapse to within ``bound``."""
+    from .post.decimate import decimate
+
+    return decimate(mesh, max_error=bound)
 
 
 def refuse_outputs_read(outputs: Sequence[str | Path], *volumes: Volume | None) -> None:
@@ -352,40 +421,13 @@ def _extract_and_write(
     progress: Callable[[str], None],
 ) -> ConvertResult:
     """Extract one level, post-process, sample attributes, write."""
-    method_options = {} if opts.axis is None else {"axis": opts.axis}
-    if opts.vertex_offset is not None:
-        method_options["vertex_offset"] = opts.vertex_offset
-    progress("extracting")
     blocks = opts.blocks
     if writer.streams and blocks.spill_dir is None:
         # a block-wise mesh larger than the budget waits for the writer on disk
         # (a stream's, standard output's, in the temporary folder)
         folder = tempfile.gettempdir() if output_stream(output) is not None else output.parent
         blocks = replace(blocks, spill_dir=Path(folder).resolve())
-    mesh = extract(
-        volume,
-        level,
-        method=opts.method,
-        flip=opts.flip,
-        ambiguity=opts.ambiguity,
-        nan_as=opts.nan_as,
-        on_status=on_status,
-        blocks=blocks,
-        **method_options,
-    )
-    extracted = None
-    if opts.post.steps:
-        progress("post-processing")
-        extracted = mesh
-        mesh = post_process(
-            mesh,
-            volume,
-            opts.post,
-            ambiguity=opts.ambiguity or DEFAULT_AMBIGUITY,
-            flip=opts.flip,
-            nan_as=opts.nan_as,
-            on_status=on_status,
-        )
+    mesh, extracted = _extract(volume, level, replace(opts, blocks=blocks), on_status, progress)
     if opts.normals and len(mesh.cells):
         progress("normals")
         mesh.normals = vertex_normals(mesh, volume, flip=opts.flip, nan_as=opts.nan_as)
@@ -405,6 +447,46 @@ def _extract_and_write(
         mesh, output, format=writer.name, ascii=opts.ascii, force=opts.force, on_status=on_status
     )
     return ConvertResult(volume, mesh, path, writer.name, opts.ascii, extracted)
+
+
+def _extract(
+    volume: Volume,
+    level: float | str,
+    opts: ConvertOptions,
+    on_status: Callable[[str], None] | None,
+    progress: Callable[[str], None],
+) -> tuple[Mesh, Mesh | None]:
+    """Extract one level and post-process it: the mesh, and the mesh as extracted
+    when post-processing changed it (else None)."""
+    method_options = {} if opts.axis is None else {"axis": opts.axis}
+    if opts.vertex_offset is not None:
+        method_options["vertex_offset"] = opts.vertex_offset
+    progress("extracting")
+    mesh = extract(
+        volume,
+        level,
+        method=opts.method,
+        flip=opts.flip,
+        ambiguity=opts.ambiguity,
+        nan_as=opts.nan_as,
+        on_status=on_status,
+        blocks=opts.blocks,
+        **method_options,
+    )
+    extracted = None
+    if opts.post.steps:
+        progress("post-processing")
+        extracted = mesh
+        mesh = post_process(
+            mesh,
+            volume,
+            opts.post,
+            ambiguity=opts.ambiguity or DEFAULT_AMBIGUITY,
+            flip=opts.flip,
+            nan_as=opts.nan_as,
+            on_status=on_status,
+        )
+    return mesh, extracted
 
 
 def _value_volume(opts: ConvertOptions, volume: Volume) -> Volume:

@@ -9,7 +9,13 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import check_output, refuse_inputs, refuse_shared, refuse_stream
-from .convert import ConvertOptions, ConvertResult, read_input, refuse_outputs_read
+from .convert import (
+    ConvertOptions,
+    ConvertResult,
+    bounded_collapse,
+    read_input,
+    refuse_outputs_read,
+)
 from .errors import IsoconvertError
 from .extract.tables import DEFAULT_AMBIGUITY
 from .grid import grid_slab_zyx
@@ -162,7 +168,7 @@ def convert_labels(
             unit=volume.unit,
             data_type=volume_data_type(largest) if opts.with_volume else data_type_for(largest),
             lods=opts.layer_lods,
-            decimate=_bounded,
+            decimate=bounded_collapse,
             chunk=opts.fragment_size,
             sharded=opts.sharded,
             legacy=opts.legacy_mesh,
@@ -194,13 +200,6 @@ def convert_labels(
 def _layer_object(label: int, legacy: bool) -> str:
     """The file of a layer's object: its fragments (multi-resolution) or manifest (legacy)."""
     return f"{label}:0" if legacy else str(label)
-
-
-def _bounded(mesh, bound: float):
-    """A precomputed layer's coarser level: the bounded collapse to within ``bound``."""
-    from .post.decimate import decimate
-
-    return decimate(mesh, max_error=bound)
 
 
 #: Of the face-neighbouring sample pairs inside labels (neither background), the

@@ -368,7 +368,6 @@ def test_convert_labels_writes_a_layer_cloud_volume_reads(tmp_path, capsys):
     assert "exists" in capsys.readouterr().err
     args = ["convert", str(path), "-o", str(tmp_path / "x"), "--format", "precomputed"]
     for extra, message in [
-        (["--level", "1"], "use it with convert --labels"),
         (["--labels", "--lods", "0"], "1 or more"),
         (["--labels", "--single-file"], "leave out --single-file"),
         (["--labels", "--fragment-size", "0"], "1 voxel a side or more"),

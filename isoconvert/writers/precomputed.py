@@ -84,8 +84,8 @@ def not_a_file(mesh: Mesh, fh, ascii: bool) -> None:
 
 #: Where the precomputed format goes.
 LAYER_ONLY = (
-    "precomputed writes a folder holding every label's mesh: use it with "
-    "convert --labels -o FOLDER --format precomputed"
+    "precomputed writes a folder holding every object's mesh: use it with "
+    "convert (--labels or --level) -o FOLDER --format precomputed"
 )
 
 
