@@ -22,7 +22,9 @@ the peer), beside the best and median times. The pipelines:
 - ``layer``: the same atlas to a Neuroglancer precomputed layer: ``--format
   precomputed`` with 1 level of detail, 3, and 3 cut into 64-voxel fragments, against
   zmesh + cloud-volume writing the single-resolution format (cloud-volume has no
-  multi-resolution writer). No target: the formats differ.
+  multi-resolution writer); and one level with the labels' voxels (``--with-volume``)
+  against the same script writing them too (compressed_segmentation, both uncompressed
+  on disk). No target: the formats differ.
 - ``normals``: a 384^3 float32 gyroid (raw) to binary PLY with and without ``--normals``.
   Target 1.3x.
 - ``ct-bound``: the chest CT (DICOM series, 512x512x64, level 300.5 HU) decimated with
@@ -122,7 +124,7 @@ for label in np.unique(sides):
 ZMESH_LAYER = '''\
 """np.load + zmesh + cloud-volume: a Neuroglancer layer of every label's mesh
 (cloud-volume writes the single-resolution format; it has no multi-resolution
-writer, igneous has)."""
+writer, igneous has), and with "voxels" the labels as compressed_segmentation chunks."""
 import shutil
 import sys
 
@@ -131,18 +133,20 @@ from cloudvolume import CloudVolume
 from cloudvolume.mesh import Mesh
 from zmesh import Mesher
 
-path, out = sys.argv[1:]
+path, out, *voxels = sys.argv[1:]
 shutil.rmtree(out, ignore_errors=True)  # a fresh layer each round, as isoconvert's -f
 labels = np.load(path).T  # (x, y, z)
 mesher = Mesher((1, 1, 1))
 mesher.mesh(labels, close=True)
 info = CloudVolume.create_new_info(
-    num_channels=1, layer_type="segmentation", data_type="uint8", encoding="raw",
-    resolution=[1, 1, 1], voxel_offset=[0, 0, 0], mesh="mesh", chunk_size=[64, 64, 64],
-    volume_size=list(labels.shape),
+    num_channels=1, layer_type="segmentation", data_type="uint32" if voxels else "uint8",
+    encoding="compressed_segmentation" if voxels else "raw", resolution=[1, 1, 1],
+    voxel_offset=[0, 0, 0], mesh="mesh", chunk_size=[64, 64, 64], volume_size=list(labels.shape),
 )
-vol = CloudVolume(f"file://{out}", info=info, progress=False)
+vol = CloudVolume(f"file://{out}", info=info, progress=False, compress=False)
 vol.commit_info()
+if voxels:
+    vol[:, :, :] = labels.astype(np.uint32)
 meshes = []
 for label in mesher.ids():
     if label:
@@ -274,9 +278,18 @@ def layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
             "zmesh + cloud-volume script (1 level)",
             [sys.executable, str(tmp / "zmesh_layer.py"), str(atlas), str(tmp / "zl")],
         ),
+        Command(
+            "isoconvert 1 level --with-volume",
+            base + ["--lods", "1", "--with-volume", "-o", str(tmp / "l1v")],
+        ),
+        Command(
+            "zmesh + cloud-volume script, voxels too",
+            [sys.executable, str(tmp / "zmesh_layer.py"), str(atlas), str(tmp / "zlv"), "voxels"],
+        ),
     ]
     return commands, [
-        ("isoconvert precomputed, 1 level", "zmesh + cloud-volume script (1 level)", None)
+        ("isoconvert precomputed, 1 level", "zmesh + cloud-volume script (1 level)", None),
+        ("isoconvert 1 level --with-volume", "zmesh + cloud-volume script, voxels too", None),
     ]
 
 
