@@ -142,36 +142,57 @@ def compressed_segmentation(chunk: np.ndarray, block: int = BLOCK) -> bytes:
         .transpose(0, 2, 4, 1, 3, 5)
         .reshape(gz * gy * gx, block**3)
     )
-    n_blocks = len(blocks)
-    header = np.zeros((n_blocks, 2), dtype="<u4")
-    body: list[np.ndarray] = []
-    at = 2 * n_blocks  # words from the channel's start
-    uniform = blocks.min(axis=1) == blocks.max(axis=1)
-    for b in range(n_blocks):
-        if uniform[b]:  # most blocks of a segmentation: 0 bits, a table of one label
-            table, encoded, bits = blocks[b, :1], np.zeros(0, dtype="<u4"), 0
-        else:
-            table, index = np.unique(blocks[b], return_inverse=True)
-            bits = next(k for k in _BITS if (1 << k) >= len(table))
-            encoded = _pack(index.astype(np.uint32), bits)
-        header[b, 1] = at
-        at += len(encoded)
-        header[b, 0] = at | (bits << 24)
-        at += len(table) * words_per_value
-        if at >= 1 << 24:
-            raise ValueError("compressed_segmentation: a chunk beyond 2**24 words")
-        body += [encoded, table.astype(chunk.dtype.newbyteorder("<")).view("<u4")]
-    return b"".join([np.array([1], dtype="<u4").tobytes(), header.tobytes()] +
-                    [part.tobytes() for part in body])  # fmt: skip
+    n_blocks, size = blocks.shape
+    # each block's lookup table is its sorted distinct labels, a voxel's code the rank
+    # of its label there; most blocks of a segmentation hold one label (code 0, no
+    # bits), the others are sorted once, their runs numbered and scattered back
+    mixed = np.flatnonzero(blocks.min(axis=1) != blocks.max(axis=1))
+    order = np.argsort(blocks[mixed], axis=1, kind="stable")
+    ranked = np.take_along_axis(blocks[mixed], order, axis=1)
+    first = np.ones(ranked.shape, dtype=bool)
+    first[:, 1:] = ranked[:, 1:] != ranked[:, :-1]
+    codes = np.empty(ranked.shape, dtype=np.uint32)
+    np.put_along_axis(codes, order, (np.cumsum(first, axis=1) - 1).astype(np.uint32), axis=1)
+    counts = np.ones(n_blocks, dtype=np.int64)
+    counts[mixed] = first.sum(axis=1)
+    allowed = np.array(_BITS)
+    bits = allowed[np.searchsorted(allowed, np.ceil(np.log2(counts)))]
+    encoded_words = size * bits // 32
+    table_words = counts * words_per_value
+    starts = 2 * n_blocks + np.concatenate([[0], np.cumsum(encoded_words + table_words)[:-1]])
+    tables = starts + encoded_words
+    if n_blocks and tables[-1] >= 1 << 24:
+        raise ValueError("compressed_segmentation: a chunk beyond 2**24 words")
+    out = np.zeros(2 * n_blocks + int((encoded_words + table_words).sum()), dtype="<u4")
+    out[0 : 2 * n_blocks : 2] = tables | (bits << 24)  # the lookup table offset, the bits
+    out[1 : 2 * n_blocks : 2] = starts  # the encoded values' offset
+    for b in np.unique(bits[mixed]):  # blocks of one width together
+        rows = np.flatnonzero(bits[mixed] == b)
+        width = size * int(b) // 32
+        out[starts[mixed[rows], None] + np.arange(width)] = _pack(codes[rows], int(b))
+    # the tables (uint64 labels as two little-endian words, low first)
+    little = chunk.dtype.newbyteorder("<")
+    uniform = np.setdiff1d(np.arange(n_blocks), mixed, assume_unique=True)
+    single = blocks[uniform, 0].astype(little).view("<u4")
+    several = ranked[first].astype(little).view("<u4")
+    mixed_counts = counts[mixed]
+    within = np.arange(int(mixed_counts.sum())) - np.repeat(
+        np.cumsum(mixed_counts) - mixed_counts, mixed_counts
+    )
+    at = np.repeat(tables[mixed], mixed_counts) + within * words_per_value
+    for word in range(words_per_value):
+        out[tables[uniform] + word] = single[word::words_per_value]
+        out[at + word] = several[word::words_per_value]
+    return np.array([1], dtype="<u4").tobytes() + out.tobytes()
 
 
-def _pack(index: np.ndarray, bits: int) -> np.ndarray:
-    """(N,) indices below 2**bits packed ``32 // bits`` to a little-endian word, the
-    first in the lowest bits."""
+def _pack(codes: np.ndarray, bits: int) -> np.ndarray:
+    """(R, N) codes below 2**bits packed ``32 // bits`` to a little-endian word, the
+    first in the lowest bits: (R, N * bits / 32) words."""
     per = 32 // bits
     shifts = np.arange(per, dtype=np.uint64) * np.uint64(bits)
-    words = (index.reshape(-1, per).astype(np.uint64) << shifts).sum(axis=1)
-    return words.astype("<u4")
+    grouped = codes.reshape(len(codes), -1, per).astype(np.uint64) << shifts
+    return grouped.sum(axis=2).astype("<u4")
 
 
 __all__ = ["BLOCK", "CHUNK", "compressed_segmentation", "volume_data_type", "write_chunks"]
