@@ -10,6 +10,7 @@
 // rows in the same order as the whole volume.
 #include "cubes.hpp"
 
+#include "sample.hpp"
 #include "scan.hpp"
 #include "trilinear.hpp"
 
@@ -163,7 +164,8 @@ struct Walk {
   // Filling pass for row (j, k): its vertices, and its cubes' triangles.
   template <class T>
   void fill(const T *f, i64 j, i64 k, const CubesCount &n, const Starts &at, const Placement &w,
-            double *verts, i64 *ids, i64 *tris) const {
+            double *verts, i64 *ids, i64 *tris, const EdgeNormals *normals,
+            const Slab<T> &grid) const {
     i64 r[4];
     const std::uint64_t *bits[4];
     bool cubes;
@@ -202,6 +204,14 @@ struct Walk {
       w.world(px, py, pz, verts + 3 * v);
       ids[v] = id;
     };
+    // The normal of vertex v, once placed (see EdgeNormals): the samples the
+    // stencils read are in cache, next to the edge's.
+    auto normal = [&](i64 v) {
+      if (normals) {
+        sample_point(grid, normals->map, verts + 3 * v, true, normals->slack,
+                     normals->out + 3 * v);
+      }
+    };
 
     for (i64 word = lo >> 6; word <= hi >> 6; ++word) {
       const Word m(s, bits, word);
@@ -211,17 +221,20 @@ struct Walk {
       for (std::uint64_t e = m.x[0]; e; e &= e - 1) {
         const i64 i = base + ctz(e), gi = i + w.index_origin[0];
         const double d = edge_fraction(double(p0[i]), double(p0[i + 1]), level, w.offset);
-        put(vx++, double(gi) + d, y, z, 3 * (gi + id_row));
+        put(vx, double(gi) + d, y, z, 3 * (gi + id_row));
+        normal(vx++);
       }
       for (std::uint64_t e = m.y[0]; e; e &= e - 1) {
         const i64 i = base + ctz(e), gi = i + w.index_origin[0];
         const double d = edge_fraction(double(p0[i]), double(p1[i]), level, w.offset);
-        put(vy++, double(gi), y + d, z, 3 * (gi + id_row) + 1);
+        put(vy, double(gi), y + d, z, 3 * (gi + id_row) + 1);
+        normal(vy++);
       }
       for (std::uint64_t e = m.z[0]; e; e &= e - 1) {
         const i64 i = base + ctz(e), gi = i + w.index_origin[0];
         const double d = edge_fraction(double(p0[i]), double(p2[i]), level, w.offset);
-        put(vz++, double(gi), y, z + d, 3 * (gi + id_row) + 2);
+        put(vz, double(gi), y, z + d, 3 * (gi + id_row) + 2);
+        normal(vz++);
       }
       if (cubes) {
         for (std::uint64_t c = m.cubes; c; c &= c - 1) {
@@ -370,12 +383,16 @@ void count_cubes(const T *f, const RowScan &s, const CubeTable &table,
 template <class T>
 void fill_cubes(const T *f, const RowScan &s, const CubeTable &table,
                 const TrilinearTable *trilinear, const CubesCount &counts, const Placement &where,
-                int threads, double *verts, i64 *ids, i64 *tris) {
+                int threads, double *verts, i64 *ids, i64 *tris, const EdgeNormals *normals) {
   Starts at;
   starts(s, counts, at);
   const Walk walk{s, table, trilinear};
+  // the samples as sample_points sees a grid in memory: one slab, the whole
+  // grid (NaN/Inf were replaced before the kernels ran)
+  const Slab<T> grid{f, s.nx, s.ny, s.nz, 0, s.nz, false, 0.0,
+                     normals ? normals->missing : nullptr};
   for_each_row(s, threads, [&](i64 j, i64 k, i64) {
-    walk.fill(f, j, k, counts, at, where, verts, ids, tris);
+    walk.fill(f, j, k, counts, at, where, verts, ids, tris, normals, grid);
   });
 }
 
@@ -384,7 +401,8 @@ void fill_cubes(const T *f, const RowScan &s, const CubeTable &table,
                                const TrilinearTable *, int, CubesCount &);            \
   template void fill_cubes<T>(const T *, const RowScan &, const CubeTable &,          \
                               const TrilinearTable *, const CubesCount &,             \
-                              const Placement &, int, double *, i64 *, i64 *);
+                              const Placement &, int, double *, i64 *, i64 *,         \
+                              const EdgeNormals *);
 ISO_FOR_EACH_SAMPLE_TYPE(ISO_CUBES)
 #undef ISO_CUBES
 

@@ -31,6 +31,7 @@ def marching_cubes(
     nan_as: float | None = None,
     vertex_offset: float | None = None,
     on_status: Callable[[str], None] | None = None,
+    normals: bool = False,
 ) -> Mesh:
     """Extract the isosurface of a 3D volume with Marching Cubes.
 
@@ -56,6 +57,11 @@ def marching_cubes(
         :func:`~isoconvert.extract.prepare.resolve_vertex_offset`).
     on_status : callable or None
         Receives one-line notices.
+    normals : bool
+        Also give ``mesh.normals`` (when there are triangles): the normals of
+        :func:`isoconvert.vertex_normals`, computed in the filling pass from
+        the gradients at the two ends of each bipolar edge instead of by a
+        second pass over the volume (see :func:`fill_pass_normals`).
 
     Returns
     -------
@@ -73,10 +79,110 @@ def marching_cubes(
         volume, 3, "cubes", level, nan_as=nan_as, vertex_offset=vertex_offset, on_status=on_status
     )
     block = CubesBlock.whole(volume, prep.offset, flip, prep.threads, ambiguity=ambiguity)
-    verts, edge_ids, tris = block.extract(prep.array, prep.scan)
-    return Mesh(
+    if not normals:
+        verts, edge_ids, tris = block.extract(prep.array, prep.scan)
+        return Mesh(
+            verts,
+            tris,
+            edge_ids,
+            mesh_info(volume, "cubes", prep.level, flip, prep.offset, ambiguity),
+        )
+    sign = 1.0 if flip else -1.0
+    verts, edge_ids, tris, gradients = block.extract_with_normals(prep.array, prep.scan, sign)
+    mesh = Mesh(
         verts, tris, edge_ids, mesh_info(volume, "cubes", prep.level, flip, prep.offset, ambiguity)
     )
+    if len(tris):  # as vertex_normals is asked: only for a mesh with triangles
+        mesh.normals = fill_pass_normals(mesh, gradients, prep.array, block, sign, prep.threads)
+    return mesh
+
+
+#: How far outside a grid (in samples) a point may be and still be sampled on
+#: its face (rounding of world coordinates); beyond it, the value is NaN. The
+#: filling pass's normals and :func:`isoconvert.vertex_normals` share it.
+SLACK = 1e-6
+
+
+def gradient_maps(affine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(to_index, to_world)`` as ``_native.sample_points`` and the filling
+    pass take them, for a grid whose index-to-world matrix is ``affine``.
+
+    Row vectors: ``index = (world - origin) @ to_index`` with ``to_index =
+    inv(affine).T``, and gradients, being covectors, go to world space as
+    ``d/d(world) = d/d(index) @ inv(affine)``. One function for both callers,
+    so that both hand their kernel the same bits.
+    """
+    inverse = np.linalg.inv(np.asarray(affine, dtype=np.float64))
+    return np.ascontiguousarray(inverse.T), np.ascontiguousarray(inverse)
+
+
+def fill_pass_normals(
+    mesh: Mesh,
+    gradients: np.ndarray,
+    samples: np.ndarray,
+    block: CubesBlock,
+    sign: float,
+    threads: int,
+) -> np.ndarray:
+    """Finish the normals the filling pass gave, as :func:`isoconvert.vertex_normals` does.
+
+    The filling pass (src/cubes.cpp, ``EdgeNormals``) writes the normal of
+    every vertex on a grid edge: the central-difference gradients at the
+    edge's two samples mixed by the vertex's place on the edge, which is what
+    ``vertex_normals``' trilinear sampling of the gradient field gives there.
+    Left to do here: the vertices inside cubes (``ambiguity="trilinear"``),
+    which lie on no grid edge and are sampled as ``vertex_normals`` samples
+    them, and the vertices whose gradient vanishes or is not finite, which
+    take the area-weighted normal of their triangles.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The extracted mesh (vertices, cells and edge ids).
+    gradients : (V, 3) float32
+        The filling pass's normals; finished in place.
+    samples : (Z, Y, X) array
+        The samples the mesh was extracted from (NaN/Inf already replaced).
+    block : CubesBlock
+        The whole grid's block.
+    sign : float
+        -1.0 (from values >= level to values < level), or 1.0 with ``flip``.
+    threads : int
+
+    Returns
+    -------
+    normals : (V, 3) float32
+        ``gradients``.
+    """
+    from .. import _native
+
+    inner = np.flatnonzero(mesh.edge_ids >= inner_base(block.grid_shape))
+    if len(inner):
+        # not on a grid edge: the trilinear gradient field at the point, sampled
+        # by the kernel vertex_normals uses, with the same maps
+        sampled = np.empty((len(inner), 3), dtype=np.float32)
+        _native.sample_points(
+            samples,
+            0,
+            samples.shape[0],
+            np.ascontiguousarray(mesh.vertices[inner], dtype=np.float64),
+            np.ascontiguousarray(block.origin, dtype=np.float64),
+            *gradient_maps(block.affine),
+            sign,
+            True,
+            True,
+            False,
+            0.0,
+            SLACK,
+            threads,
+            sampled,
+        )
+        gradients[inner] = sampled
+    flat = ~gradients.any(axis=1)
+    flat |= np.isnan(gradients[:, 0])
+    if flat.any():
+        gradients[flat] = mesh.vertex_normals()[flat]
+    return gradients
 
 
 @dataclass(frozen=True)
@@ -118,6 +224,46 @@ class CubesBlock(Block):
         triangles : (C, 3) int64
             Indices into this block's vertices.
         """
+        verts, edge_ids, tris, _ = self._fill(samples, scan, index_origin, allocate)
+        return verts, edge_ids, tris
+
+    def extract_with_normals(
+        self, samples: np.ndarray, scan: object, sign: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`extract` on the whole grid, and the normals of its edge vertices.
+
+        The normals come from the filling pass (see :func:`fill_pass_normals`);
+        their stencils reach one sample past an edge's ends, which a block's
+        one-sample overlap does not hold, so this is for the whole grid only
+        (block-wise runs sample their normals after extraction).
+
+        Parameters
+        ----------
+        samples, scan
+            As for :meth:`extract`, of the whole grid.
+        sign : float
+            -1.0 (normals from values >= level to values < level) or 1.0 (``flip``).
+
+        Returns
+        -------
+        vertices, edge_ids, triangles
+            As :meth:`extract`.
+        normals : (V, 3) float32
+            Unit world normals of the vertices on grid edges (0 where the
+            gradient vanishes, NaN where it is not finite); vertices inside
+            cubes are left unset.
+        """
+        return self._fill(samples, scan, (0, 0, 0), kernel_outputs, sign)
+
+    def _fill(
+        self,
+        samples: np.ndarray,
+        scan: object,
+        index_origin: tuple[int, int, int],
+        allocate: Allocate,
+        sign: float | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """Count, allocate and fill; normals too when ``sign`` is given."""
         from .. import _native
 
         trilinear = self.ambiguity == TRILINEAR
@@ -126,6 +272,11 @@ class CubesBlock(Block):
         special = native_trilinear_table() if trilinear else None
         n = _native.count_cubes(samples, scan, counts, table, special, self.threads)
         verts, edge_ids, tris = allocate(n.vertices, n.triangles, 3)
+        if sign is None:
+            normals, maps = _NO_NORMALS, (_NO_MATRIX, _NO_MATRIX)
+        else:
+            normals = np.empty((n.vertices, 3), dtype=np.float32)
+            maps = gradient_maps(self.affine)
         _native.fill_cubes(
             samples,
             scan,
@@ -139,5 +290,14 @@ class CubesBlock(Block):
             verts,
             edge_ids,
             tris,
+            *maps,
+            sign or 0.0,
+            SLACK,
+            normals,
         )
-        return verts, edge_ids, tris
+        return verts, edge_ids, tris, None if sign is None else normals
+
+
+# fill_cubes' arguments for "no normals"
+_NO_NORMALS = np.empty((0, 3), dtype=np.float32)
+_NO_MATRIX = np.empty(0, dtype=np.float64)
