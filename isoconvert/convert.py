@@ -359,6 +359,9 @@ def _extract_and_write(
         nan_as=opts.nan_as,
         on_status=on_status,
         blocks=blocks,
+        # from the filling pass where extract can (Marching Cubes in memory),
+        # unless post-processing moves the vertices before the normals are due
+        normals=opts.normals and not opts.post.steps,
         **method_options,
     )
     extracted = None
@@ -375,8 +378,9 @@ def _extract_and_write(
             on_status=on_status,
         )
     if opts.normals and len(mesh.cells):
-        progress("normals")
-        mesh.normals = vertex_normals(mesh, volume, flip=opts.flip, nan_as=opts.nan_as)
+        if mesh.normals is None:  # not from the filling pass: sample them
+            progress("normals")
+            mesh.normals = vertex_normals(mesh, volume, flip=opts.flip, nan_as=opts.nan_as)
         mesh.info["normals"] = "volume gradient"
     if value_volume is not None:
         progress("values")
