@@ -165,7 +165,7 @@ struct Walk {
   template <class T>
   void fill(const T *f, i64 j, i64 k, const CubesCount &n, const Starts &at, const Placement &w,
             double *verts, i64 *ids, i64 *tris, const EdgeNormals *normals,
-            const Slab<T> &grid) const {
+            const WholeGrid<T> &grid) const {
     i64 r[4];
     const std::uint64_t *bits[4];
     bool cubes;
@@ -205,11 +205,15 @@ struct Walk {
       ids[v] = id;
     };
     // The normal of vertex v, once placed (see EdgeNormals): the samples the
-    // stencils read are in cache, next to the edge's.
+    // stencils read are in cache, next to the edge's. Those left 0 (the
+    // gradient vanishes) or NaN are counted, so that the caller looks for
+    // them only when there are some.
+    i64 flat = 0;
     auto normal = [&](i64 v) {
       if (normals) {
-        sample_point(grid, normals->map, verts + 3 * v, true, normals->slack,
-                     normals->out + 3 * v);
+        float *o = normals->out + 3 * v;
+        sample_point(grid, normals->map, verts + 3 * v, true, normals->slack, o);
+        flat += (o[0] == 0.0f && o[1] == 0.0f && o[2] == 0.0f) || std::isnan(o[0]);
       }
     };
 
@@ -276,6 +280,7 @@ struct Walk {
         zs[b] += popcount(m.z[b]);
       }
     }
+    if (flat) normals->flat->fetch_add(flat, std::memory_order_relaxed);
   }
 
   // A special cube's triangles from triangle t on, and its interior vertices
@@ -387,10 +392,7 @@ void fill_cubes(const T *f, const RowScan &s, const CubeTable &table,
   Starts at;
   starts(s, counts, at);
   const Walk walk{s, table, trilinear};
-  // the samples as sample_points sees a grid in memory: one slab, the whole
-  // grid (NaN/Inf were replaced before the kernels ran)
-  const Slab<T> grid{f, s.nx, s.ny, s.nz, 0, s.nz, false, 0.0,
-                     normals ? normals->missing : nullptr};
+  const WholeGrid<T> grid{f, s.nx, s.ny, s.nz};
   for_each_row(s, threads, [&](i64 j, i64 k, i64) {
     walk.fill(f, j, k, counts, at, where, verts, ids, tris, normals, grid);
   });

@@ -51,7 +51,7 @@ struct EdgeNormals {
   PointMap map;               // the grid's placement, sign and normalize = true
   double slack;               // as sample_points' (the vertices are inside)
   float *out;                 // (V, 3)
-  std::atomic<bool> *missing; // set if a stencil left the grid (a bug)
+  std::atomic<i64> *flat;     // counts the normals left 0 or NaN (for the caller)
 };
 
 // verts (V, 3), ids (V,), tris (C, 3), sized from `counts`; `normals` null or

@@ -201,7 +201,7 @@ void bind_sample_type(nb::module_ &m) {
         // normals: to_world (3, 3) asks for them (none: 0 values); their
         // stencils take the samples as the whole grid, so the block must be it
         iso::EdgeNormals edge_normals;
-        std::atomic<bool> missing{false};
+        std::atomic<i64> flat{0};
         const bool with_normals = to_world.size() != 0;
         if (with_normals) {
           check_out(normals, n.vertices, 3, "normals");
@@ -223,16 +223,14 @@ void bind_sample_type(nb::module_ &m) {
           edge_normals.map.normalize = true;
           edge_normals.slack = slack;
           edge_normals.out = normals.data();
-          edge_normals.missing = &missing;
+          edge_normals.flat = &flat;
         }
         {
           nb::gil_scoped_release unlocked;
           iso::fill_cubes<T>(f.data(), s, table, trilinear, n, w, threads, verts.data(),
                              ids.data(), tris.data(), with_normals ? &edge_normals : nullptr);
         }
-        if (missing.load()) {
-          throw std::logic_error("fill_cubes: a normal's stencil left the grid");
-        }
+        return flat.load();
       },
       "f"_a.noconvert(), "scan"_a, "n"_a, "counts"_a, "edges"_a, "trilinear"_a.none(),
       "inner_base"_a, "affine"_a, "origin"_a,
@@ -243,7 +241,8 @@ void bind_sample_type(nb::module_ &m) {
       "and to_world (3, 3) (empty for none; as sample_points takes them) also the\n"
       "unit normals (V, 3) float32 of the vertices on grid edges, as sample_points\n"
       "gives them at the vertices (0 where the gradient vanishes, NaN where it is\n"
-      "not finite); the whole grid only; interior vertices are left as they are.");
+      "not finite); the whole grid only; interior vertices are left as they are.\n"
+      "Returns how many normals are 0 or NaN (0 without normals).");
 }
 
 }  // namespace

@@ -14,6 +14,35 @@
 
 namespace iso {
 
+// d/d(index) along one axis at a sample: central differences inside,
+// one-sided on the grid's faces, 0 across a grid one sample thick.
+inline void stencil(i64 p, i64 n, i64 &lo, i64 &hi, double &scale) {
+  if (n < 2) {
+    lo = hi = p;
+    scale = 0.0;
+  } else if (p == 0) {
+    lo = 0, hi = 1, scale = 1.0;
+  } else if (p == n - 1) {
+    lo = n - 2, hi = n - 1, scale = 1.0;
+  } else {
+    lo = p - 1, hi = p + 1, scale = 0.5;
+  }
+}
+
+// The index-space gradient at sample (i, j, k) of a grid S (a Slab or a
+// WholeGrid: its samples by s.at(i, j, k), its size by nx, ny and depth).
+template <class S>
+inline void grid_gradient(const S &s, i64 i, i64 j, i64 k, double g[3]) {
+  i64 lo, hi;
+  double d;
+  stencil(i, s.nx, lo, hi, d);
+  g[0] = d == 0.0 ? 0.0 : d * (s.at(hi, j, k) - s.at(lo, j, k));
+  stencil(j, s.ny, lo, hi, d);
+  g[1] = d == 0.0 ? 0.0 : d * (s.at(i, hi, k) - s.at(i, lo, k));
+  stencil(k, s.depth, lo, hi, d);
+  g[2] = d == 0.0 ? 0.0 : d * (s.at(i, j, hi) - s.at(i, j, lo));
+}
+
 // A slab of layers k0 .. k0 + nz - 1 of a grid with `depth` layers in all.
 template <class T>
 struct Slab {
@@ -38,31 +67,19 @@ struct Slab {
     return (fill_nonfinite && !std::isfinite(v)) ? fill : v;
   }
 
-  // d/d(index) along one axis at a sample: central differences inside,
-  // one-sided on the grid's faces, 0 across a grid one sample thick.
-  static void stencil(i64 p, i64 n, i64 &lo, i64 &hi, double &scale) {
-    if (n < 2) {
-      lo = hi = p;
-      scale = 0.0;
-    } else if (p == 0) {
-      lo = 0, hi = 1, scale = 1.0;
-    } else if (p == n - 1) {
-      lo = n - 2, hi = n - 1, scale = 1.0;
-    } else {
-      lo = p - 1, hi = p + 1, scale = 0.5;
-    }
-  }
+  void gradient(i64 i, i64 j, i64 k, double g[3]) const { grid_gradient(*this, i, j, k, g); }
+};
 
-  void gradient(i64 i, i64 j, i64 k, double g[3]) const {
-    i64 lo, hi;
-    double s;
-    stencil(i, nx, lo, hi, s);
-    g[0] = s == 0.0 ? 0.0 : s * (at(hi, j, k) - at(lo, j, k));
-    stencil(j, ny, lo, hi, s);
-    g[1] = s == 0.0 ? 0.0 : s * (at(i, hi, k) - at(i, lo, k));
-    stencil(k, depth, lo, hi, s);
-    g[2] = s == 0.0 ? 0.0 : s * (at(i, j, hi) - at(i, j, lo));
-  }
+// The samples of a grid held whole (no NaN/Inf among them: they were replaced
+// before the kernels ran), read with no check: what a Slab of all its layers
+// without fill reads, for the filling pass of Marching Cubes (cubes.cpp).
+template <class T>
+struct WholeGrid {
+  const T *f;
+  i64 nx, ny, depth;
+
+  double at(i64 i, i64 j, i64 k) const { return static_cast<double>(f[(k * ny + j) * nx + i]); }
+  void gradient(i64 i, i64 j, i64 k, double g[3]) const { grid_gradient(*this, i, j, k, g); }
 };
 
 // The cell corner below `x` along an axis of n samples, and the fraction
@@ -93,7 +110,7 @@ struct PointMap {
 
 // The trilinear value (o[0]) or the world gradient (o[0..2], times map.sign,
 // unit length when map.normalize: zero stays zero, NaN stays NaN) of the grid
-// in slab `s` at world point `point`; NaN when the point lies outside the grid
+// `s` (a Slab or a WholeGrid) at world point `point`; NaN when the point lies outside the grid
 // by more than `slack` samples.
 //
 // At a point on a grid edge (an isosurface vertex) the weights of the corners
@@ -101,9 +118,9 @@ struct PointMap {
 // the gradients at the edge's two samples; a point that the round trip
 // through world coordinates puts a hair off the edge gives those corners
 // weights of order 1e-16, as it does wherever it is computed.
-template <class T>
-inline void sample_point(const Slab<T> &s, const PointMap &map, const double *point,
-                         bool gradient, double slack, float *o) {
+template <class S>
+inline void sample_point(const S &s, const PointMap &map, const double *point, bool gradient,
+                         double slack, float *o) {
   const int width = gradient ? 3 : 1;
   double x[3];
   for (int b = 0; b < 3; ++b) {
@@ -117,17 +134,28 @@ inline void sample_point(const Slab<T> &s, const PointMap &map, const double *po
     for (int c = 0; c < width; ++c) o[c] = std::numeric_limits<float>::quiet_NaN();
     return;
   }
+  // The 8 corners in the order x fastest, each weighed by the product of its
+  // three axis weights (x times y, times z) and skipped when that is 0 (which
+  // also keeps corners beyond a 1-sample axis out). An axis weight of 0 makes
+  // every product it enters 0, so those corners are passed over without
+  // looking: on a grid edge 2 corners are visited, not 8.
+  const double wx[2] = {1.0 - u, u}, wy[2] = {1.0 - v, v}, wz[2] = {1.0 - w, w};
   double acc[3] = {0.0, 0.0, 0.0};
-  for (int corner = 0; corner < 8; ++corner) {
-    const int di = corner & 1, dj = (corner >> 1) & 1, dk = corner >> 2;
-    const double weight = (di ? u : 1.0 - u) * (dj ? v : 1.0 - v) * (dk ? w : 1.0 - w);
-    if (weight == 0.0) continue;  // also keeps corners beyond a 1-sample axis out
-    if (gradient) {
-      double g[3];
-      s.gradient(i + di, j + dj, k + dk, g);
-      for (int c = 0; c < 3; ++c) acc[c] += weight * g[c];
-    } else {
-      acc[0] += weight * s.at(i + di, j + dj, k + dk);
+  for (int dk = 0; dk < 2; ++dk) {
+    if (wz[dk] == 0.0) continue;
+    for (int dj = 0; dj < 2; ++dj) {
+      if (wy[dj] == 0.0) continue;
+      for (int di = 0; di < 2; ++di) {
+        const double weight = wx[di] * wy[dj] * wz[dk];
+        if (weight == 0.0) continue;
+        if (gradient) {
+          double g[3];
+          s.gradient(i + di, j + dj, k + dk, g);
+          for (int c = 0; c < 3; ++c) acc[c] += weight * g[c];
+        } else {
+          acc[0] += weight * s.at(i + di, j + dj, k + dk);
+        }
+      }
     }
   }
   if (!gradient) {

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -97,6 +98,22 @@ def marching_cubes(
     return mesh
 
 
+class FilledNormals(NamedTuple):
+    """The normals the filling pass wrote (:meth:`CubesBlock.extract_with_normals`).
+
+    Attributes
+    ----------
+    normals : (V, 3) float32
+        Unit world normals of the vertices on grid edges: 0 where the gradient
+        vanishes, NaN where it is not finite; interior vertices unset.
+    flat : int
+        How many edge vertices' normals are 0 or NaN.
+    """
+
+    normals: np.ndarray
+    flat: int
+
+
 #: How far outside a grid (in samples) a point may be and still be sampled on
 #: its face (rounding of world coordinates); beyond it, the value is NaN. The
 #: filling pass's normals and :func:`isoconvert.vertex_normals` share it.
@@ -118,7 +135,7 @@ def gradient_maps(affine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def fill_pass_normals(
     mesh: Mesh,
-    gradients: np.ndarray,
+    gradients: FilledNormals,
     samples: np.ndarray,
     block: CubesBlock,
     sign: float,
@@ -139,7 +156,7 @@ def fill_pass_normals(
     ----------
     mesh : Mesh
         The extracted mesh (vertices, cells and edge ids).
-    gradients : (V, 3) float32
+    gradients : FilledNormals
         The filling pass's normals; finished in place.
     samples : (Z, Y, X) array
         The samples the mesh was extracted from (NaN/Inf already replaced).
@@ -152,11 +169,18 @@ def fill_pass_normals(
     Returns
     -------
     normals : (V, 3) float32
-        ``gradients``.
+        ``gradients.normals``.
     """
     from .. import _native
 
-    inner = np.flatnonzero(mesh.edge_ids >= inner_base(block.grid_shape))
+    normals, flat = gradients
+    # only the trilinear rule places vertices inside cubes; the scans below run
+    # only when there is something to find (they cost a fifth of the normals)
+    inner = (
+        np.flatnonzero(mesh.edge_ids >= inner_base(block.grid_shape))
+        if block.ambiguity == TRILINEAR
+        else ()
+    )
     if len(inner):
         # not on a grid edge: the trilinear gradient field at the point, sampled
         # by the kernel vertex_normals uses, with the same maps
@@ -177,12 +201,13 @@ def fill_pass_normals(
             threads,
             sampled,
         )
-        gradients[inner] = sampled
-    flat = ~gradients.any(axis=1)
-    flat |= np.isnan(gradients[:, 0])
-    if flat.any():
-        gradients[flat] = mesh.vertex_normals()[flat]
-    return gradients
+        normals[inner] = sampled
+        flat += int(np.count_nonzero(~sampled.any(axis=1) | np.isnan(sampled[:, 0])))
+    if flat:  # as vertex_normals: the triangles' normals where the gradient fails
+        where = ~normals.any(axis=1)
+        where |= np.isnan(normals[:, 0])
+        normals[where] = mesh.vertex_normals()[where]
+    return normals
 
 
 @dataclass(frozen=True)
@@ -229,7 +254,7 @@ class CubesBlock(Block):
 
     def extract_with_normals(
         self, samples: np.ndarray, scan: object, sign: float
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, FilledNormals]:
         """:meth:`extract` on the whole grid, and the normals of its edge vertices.
 
         The normals come from the filling pass (see :func:`fill_pass_normals`);
@@ -248,10 +273,9 @@ class CubesBlock(Block):
         -------
         vertices, edge_ids, triangles
             As :meth:`extract`.
-        normals : (V, 3) float32
-            Unit world normals of the vertices on grid edges (0 where the
-            gradient vanishes, NaN where it is not finite); vertices inside
-            cubes are left unset.
+        normals : FilledNormals
+            Unit world normals of the vertices on grid edges, and how many of
+            them failed.
         """
         return self._fill(samples, scan, (0, 0, 0), kernel_outputs, sign)
 
@@ -262,7 +286,7 @@ class CubesBlock(Block):
         index_origin: tuple[int, int, int],
         allocate: Allocate,
         sign: float | None = None,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, FilledNormals | None]:
         """Count, allocate and fill; normals too when ``sign`` is given."""
         from .. import _native
 
@@ -277,7 +301,7 @@ class CubesBlock(Block):
         else:
             normals = np.empty((n.vertices, 3), dtype=np.float32)
             maps = gradient_maps(self.affine)
-        _native.fill_cubes(
+        flat = _native.fill_cubes(
             samples,
             scan,
             n,
@@ -295,7 +319,9 @@ class CubesBlock(Block):
             SLACK,
             normals,
         )
-        return verts, edge_ids, tris, None if sign is None else normals
+        if sign is None:
+            return verts, edge_ids, tris, None
+        return verts, edge_ids, tris, FilledNormals(normals, flat)
 
 
 # fill_cubes' arguments for "no normals"
