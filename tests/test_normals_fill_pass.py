@@ -204,15 +204,42 @@ def test_other_methods_leave_normals_to_vertex_normals():
     assert extract(volume, 0.04, normals=True, method="squares").normals is None
 
 
-def test_block_wise_runs_keep_sampling_their_normals():
-    """A volume read from its file is extracted block-wise, where the filling
-    pass cannot take the gradients (a slab's overlap is one sample): extract
-    leaves mesh.normals to vertex_normals there."""
+def test_a_volume_read_from_its_file_as_one_slab(monkeypatch):
+    """A raw file is extracted block-wise; when it fits the budget it is one
+    slab, the whole grid, and its filling pass gives the normals too (the
+    second pass never runs), the same bits as sampling them after."""
+    lazy = read_volume(dataset("engine_256x256x128_uint8.raw"))
+    assert lazy.grid is not None
+    plain = extract(lazy, 80.5, flip=True)
+    assert plain.info["blocks"] == 1
+    expected = vertex_normals(plain, lazy, flip=True)
+
+    def refuse(*args, **kwargs):
+        raise SampledTwice("sample_points ran")
+
+    monkeypatch.setattr(_native, "sample_points", refuse)
+    mesh = extract(lazy, 80.5, flip=True, normals=True)
+    assert mesh.info["blocks"] == 1
+    assert np.array_equal(mesh.vertices, plain.vertices)
+    assert np.array_equal(mesh.cells, plain.cells)
+    assert mesh.normals.tobytes() == expected.tobytes()
+
+
+def test_several_slabs_and_other_methods_keep_sampling_their_normals():
+    """Where the filling pass cannot take the gradients (slabs of a volume cut
+    in several: a slab's overlap is one sample, a stencil reaches one more;
+    trilinear interior vertices of a slab; tetrahedra) extract leaves
+    mesh.normals to vertex_normals."""
+    from isoconvert.extract.blocks import Blocks
+
     lazy = read_volume(dataset("hydrogen_vtk_64x64x64_float32.raw"))
     assert lazy.grid is not None
-    mesh = extract(lazy, 0.04, normals=True)
-    assert mesh.normals is None
+    cut = extract(lazy, 0.04, normals=True, blocks=Blocks(size=16))
+    assert cut.info["blocks"] == 4 and cut.normals is None
+    assert extract(lazy, 0.04, normals=True, ambiguity="trilinear").normals is None
     assert extract(lazy, 0.04, normals=True, method="tetra").normals is None
+    one = extract(lazy, 0.04, normals=True)
+    assert one.info["blocks"] == 1 and one.normals is not None
 
 
 def test_normals_equal_vtk_flying_edges_compute_normals():

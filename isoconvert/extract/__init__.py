@@ -142,14 +142,16 @@ def extract(
         when some sample equals the level and 0 otherwise (a notice says so);
         0 places every vertex exactly by linear interpolation.
     normals : bool
-        Give ``mesh.normals`` (those of :func:`isoconvert.vertex_normals`) where
-        the extraction computes them in its filling pass, from the gradients at
-        the ends of each bipolar edge: Marching Cubes on a volume in memory.
-        Elsewhere ``mesh.normals`` stays None, for ``vertex_normals`` to sample
-        after extraction: block-wise runs (their slabs' overlap is one sample,
-        and a gradient's stencil reaches one more), tetrahedra (vertices on
-        cube diagonals, where the gradient is not linear along the edge),
-        squares and plugins. A mesh without triangles gets none either.
+        Give ``mesh.normals`` (those of :func:`isoconvert.vertex_normals`, the
+        same bits) where the extraction computes them in its filling pass, from
+        the gradients at the ends of each bipolar edge: Marching Cubes on a
+        volume in memory, or read from its file as one slab (see
+        :func:`~isoconvert.extract.blocks.extract_blocks`). Elsewhere
+        ``mesh.normals`` stays None, for ``vertex_normals`` to sample after
+        extraction: runs of several slabs (their overlap is one sample, and a
+        gradient's stencil reaches one more), tetrahedra (vertices on cube
+        diagonals, where the gradient is not linear along the edge), squares
+        and plugins. A mesh without triangles gets none either.
 
     Returns
     -------
@@ -190,6 +192,7 @@ def extract(
             nan_as=nan_as,
             blocks=blocks,
             on_status=on_status,
+            normals=normals,
             **options,
         )
     placement_note = None

@@ -60,6 +60,7 @@ from ..runner import Task, TaskFailure, cluster_size, run_in_order, worker_threa
 from ..runner.local import read_ahead
 from ..threads import kernel_threads
 from ..volume import ValueRange, Volume
+from .cubes import FilledNormals, fill_pass_normals
 from .placement import Allocate, kernel_outputs, mesh_info, reversed_orientation
 from .prepare import (
     _replace_nonfinite,
@@ -217,6 +218,9 @@ class BlockJob:
     #: the vertex offset is the automatic one: a slab with a sample equal to
     #: the level takes NO_DEGENERATE_OFFSET instead of ``offset`` 0
     auto_offset: bool = False
+    #: cubes on a slab that is the whole grid: the filling pass also gives the
+    #: normals, pointing this way (-1.0, or 1.0 with flip); None: no normals
+    normals_sign: float | None = None
 
     @property
     def last(self) -> bool:
@@ -258,6 +262,8 @@ class BlockResult:
         Owned samples equal to the level.
     offset : float
         The vertex offset the slab's vertices were placed with.
+    normals : FilledNormals or None
+        The filling pass's normals, when the job asked for them.
     """
 
     k0: int
@@ -272,6 +278,7 @@ class BlockResult:
     max: float
     equal: int
     offset: float = 0.0
+    normals: FilledNormals | None = None
 
 
 def read_block(source: np.ndarray | LazyGrid, job: BlockJob) -> np.ndarray:
@@ -324,9 +331,15 @@ def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) 
     equal = rows.equal
     if equal and not job.last:  # the overlap layer's samples are the next slab's
         equal -= int(np.count_nonzero(zyx[-1] == zyx.dtype.type(equal_to)))
-    verts, ids, cells = _block_kernel(job).extract(
-        zyx, rows, (0, 0, job.k0), allocate or kernel_outputs
-    )
+    normals = None
+    if job.normals_sign is None:
+        verts, ids, cells = _block_kernel(job).extract(
+            zyx, rows, (0, 0, job.k0), allocate or kernel_outputs
+        )
+    else:  # the slab is the whole grid (extract_blocks asks only then)
+        verts, ids, cells, normals = _block_kernel(job).extract_with_normals(
+            zyx, rows, job.normals_sign, allocate or kernel_outputs
+        )
     if job.ambiguity == TRILINEAR and job.method == "cubes":
         # vertices inside cubes have ids past the edge ids, numbered by cube
         layer = interior_layer(ids, job.grid_shape)
@@ -353,6 +366,7 @@ def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) 
         max=float(rows.max),
         equal=int(equal),
         offset=job.offset,
+        normals=normals,
     )
 
 
@@ -555,6 +569,8 @@ class MeshSink:
         self.spilled = False
         # (first vertex, first cell, vertices on the first layer) of each slab
         self.starts: list[tuple[int, int, int]] = []
+        #: the filling pass's normals of a mesh that is one slab, when asked for
+        self.normals: FilledNormals | None = None
 
     @property
     def counts(self) -> tuple[int, int]:
@@ -710,6 +726,8 @@ def stitch_blocks(results: Iterable[BlockResult], sink: MeshSink) -> None:
     for result in results:
         if result.vertices is not None:
             sink.put(result)
+        if result.normals is not None:  # one slab, the whole grid: its vertices are the mesh's
+            sink.normals = result.normals
         vertex_start, cell_start = sink.counts
         if pending is not None:
             _renumber(sink, pending, result.first_ids, vertex_start)
@@ -787,6 +805,7 @@ def extract_blocks(
     blocks: Blocks | None = None,
     on_status: Callable[[str], None] | None = None,
     sink: MeshSink | None = None,
+    normals: bool = False,
 ) -> Mesh:
     """Extract the isosurface of a 3D volume slab by slab; the same mesh as the
     in-memory path (:func:`isoconvert.extract`), bit for bit.
@@ -812,6 +831,14 @@ def extract_blocks(
         Slab size, memory budget, and a Dask scheduler to run on.
     sink : MeshSink or None
         Receives the stitched pieces; None keeps them in memory.
+    normals : bool
+        Give ``mesh.normals`` from the filling pass where it can: Marching
+        Cubes with a fixed ambiguity rule, run here, on a volume that is one
+        slab (it fits the memory budget), the usual case of a volume read from
+        its file. A gradient's stencil reaches one sample past an edge's ends,
+        and a slab holds one sample beyond its own layers: several slabs (and
+        trilinear interior vertices, tetrahedra, slabs on a cluster) leave
+        ``mesh.normals`` None, for :func:`isoconvert.vertex_normals`.
 
     Returns
     -------
@@ -854,6 +881,14 @@ def extract_blocks(
             ranges = slab_ranges(volume.shape[2], layers)
     else:
         runner = None
+    # normals in the filling pass: a single slab holds the whole grid
+    fill_normals = (
+        normals
+        and method == "cubes"
+        and ambiguity != TRILINEAR
+        and runner is None
+        and len(ranges) == 1
+    )
     threads = kernel_threads()
     while True:
         template = BlockJob(
@@ -872,6 +907,7 @@ def extract_blocks(
             threads=threads,
             source=volume.source,
             auto_offset=auto and can_equal and not offset,
+            normals_sign=(1.0 if flip else -1.0) if fill_normals else None,
         )
         jobs = [replace(template, k0=k0, k1=k1) for k0, k1 in ranges]
         out = sink or MeshSink(arity, blocks.spill_dir, blocks.budget // 4)
@@ -898,7 +934,12 @@ def extract_blocks(
         volume, method, level, flip, stats.offset, None if method == "tetra" else ambiguity
     )
     info["blocks"] = len(ranges)
+    filled = out.normals
     mesh = out.mesh(info)
+    if filled is not None and mesh.n_cells:  # as vertex_normals: only with triangles
+        mesh.normals = fill_pass_normals(
+            mesh, filled, None, _block_kernel(template), template.normals_sign, threads
+        )
     if method == "squares" and mesh.n_cells == 0:
         raise IsoconvertError(f"{volume.source}: no slice crosses level {level:g}")
     if note and on_status:

@@ -136,7 +136,7 @@ def gradient_maps(affine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def fill_pass_normals(
     mesh: Mesh,
     gradients: FilledNormals,
-    samples: np.ndarray,
+    samples: np.ndarray | None,
     block: CubesBlock,
     sign: float,
     threads: int,
@@ -158,8 +158,9 @@ def fill_pass_normals(
         The extracted mesh (vertices, cells and edge ids).
     gradients : FilledNormals
         The filling pass's normals; finished in place.
-    samples : (Z, Y, X) array
-        The samples the mesh was extracted from (NaN/Inf already replaced).
+    samples : (Z, Y, X) array or None
+        The samples the mesh was extracted from (NaN/Inf already replaced);
+        None when there are no vertices inside cubes (not the trilinear rule).
     block : CubesBlock
         The whole grid's block.
     sign : float
@@ -253,7 +254,7 @@ class CubesBlock(Block):
         return verts, edge_ids, tris
 
     def extract_with_normals(
-        self, samples: np.ndarray, scan: object, sign: float
+        self, samples: np.ndarray, scan: object, sign: float, allocate: Allocate = kernel_outputs
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, FilledNormals]:
         """:meth:`extract` on the whole grid, and the normals of its edge vertices.
 
@@ -268,6 +269,8 @@ class CubesBlock(Block):
             As for :meth:`extract`, of the whole grid.
         sign : float
             -1.0 (normals from values >= level to values < level) or 1.0 (``flip``).
+        allocate : callable
+            As for :meth:`extract`.
 
         Returns
         -------
@@ -277,7 +280,7 @@ class CubesBlock(Block):
             Unit world normals of the vertices on grid edges, and how many of
             them failed.
         """
-        return self._fill(samples, scan, (0, 0, 0), kernel_outputs, sign)
+        return self._fill(samples, scan, (0, 0, 0), allocate, sign)
 
     def _fill(
         self,
