@@ -181,6 +181,23 @@ struct Walk {
       __builtin_prefetch(p2 + i);
       __builtin_prefetch(p1 + i);
     }
+    if (normals) {
+      // the gradients' stencils reach a slice further each way, to rows
+      // likewise long out of cache: two slices up (above a z-edge's upper
+      // end) and the slice below (below the row and below a y-edge's upper
+      // end). Asking for them at once halved the normals' added time on a
+      // 384^3 gyroid.
+      const i64 slice = s.nx * s.ny;
+      const T *up = k + 2 < s.nz ? p2 + slice : nullptr;
+      const T *down = k > 0 ? p0 - slice : nullptr, *down1 = k > 0 ? p1 - slice : nullptr;
+      for (i64 i = lo; i <= hi; i += 64 / sizeof(T)) {
+        if (up) __builtin_prefetch(up + i);
+        if (down) {
+          __builtin_prefetch(down + i);
+          __builtin_prefetch(down1 + i);
+        }
+      }
+    }
     // starts of the x-vertices of the four rows, of the y-vertices of rows 0
     // and 2, of the z-vertices of rows 0 and 1
     i64 xs[4], ys[2], zs[2];
