@@ -44,14 +44,22 @@ void count_cubes(const T *f, const RowScan &s, const CubeTable &table,
 // computes them; it is taken from the vertex's position rather than from its
 // edge fraction so that the rounding of the trip through world coordinates
 // is the same too, which matters where the two gradients nearly cancel. The
-// stencils reach one sample past an edge's ends, beyond a block's overlap:
-// for a block that is the whole grid only. Interior (trilinear) vertices are
-// left alone.
+// stencils reach one sample past an edge's ends, beyond a z-slab's overlap,
+// and a vertex rounded into the next cell one more: a slab of a larger grid
+// comes with up to 2 more layers each way (`halo`), read as sample_points
+// reads a slab (a stencil that leaves them sets `missing`, a bug). Interior
+// (trilinear) vertices are left alone.
 struct EdgeNormals {
   PointMap map;               // the grid's placement, sign and normalize = true
   double slack;               // as sample_points' (the vertices are inside)
   float *out;                 // (V, 3)
   std::atomic<i64> *flat;     // counts the normals left 0 or NaN (for the caller)
+  // the samples the stencils read: layers halo_k0 .. halo_k0 + halo_layers - 1
+  // of the whole grid's `depth` (of the kernel's sample type); the slab itself
+  // when it is the whole grid
+  const void *halo;
+  i64 halo_layers, halo_k0, depth;
+  std::atomic<bool> *missing;
 };
 
 // verts (V, 3), ids (V,), tris (C, 3), sized from `counts`; `normals` null or

@@ -225,17 +225,39 @@ def test_a_volume_read_from_its_file_as_one_slab(monkeypatch):
     assert mesh.normals.tobytes() == expected.tobytes()
 
 
-def test_several_slabs_and_other_methods_keep_sampling_their_normals():
-    """Where the filling pass cannot take the gradients (slabs of a volume cut
-    in several: a slab's overlap is one sample, a stencil reaches one more;
-    trilinear interior vertices of a slab; tetrahedra) extract leaves
-    mesh.normals to vertex_normals."""
+@pytest.mark.parametrize("size", [1, 5, 16])
+def test_slabs_read_with_a_halo_give_the_same_normals(size, monkeypatch):
+    """Slabs of a volume cut in several: each is read with 2 more layers each
+    way, which the stencils reach (a slab's overlap is one sample; a vertex
+    rounded into the next cell needs one more), on the rotated grid, with NaN
+    samples in another slab's layers; the same bits as sampling after."""
     from isoconvert.extract.blocks import Blocks
 
     lazy = read_volume(dataset("hydrogen_vtk_64x64x64_float32.raw"))
     assert lazy.grid is not None
-    cut = extract(lazy, 0.04, normals=True, blocks=Blocks(size=16))
-    assert cut.info["blocks"] == 4 and cut.normals is None
+    data = np.array(lazy.data)
+    data[20:30, 25:33, 30:33] = np.nan  # layers 30-32: halo layers of some slabs
+    memory = dataclasses.replace(
+        lazy, data=data, spacing=SPACING, origin=ORIGIN, direction=DIRECTION
+    )
+    plain = extract(memory, 0.04, nan_as=0.5)
+    expected = vertex_normals(plain, memory, nan_as=0.5)
+
+    def refuse(*args, **kwargs):
+        raise SampledTwice("sample_points ran")
+
+    monkeypatch.setattr(_native, "sample_points", refuse)
+    cut = extract(memory, 0.04, nan_as=0.5, normals=True, blocks=Blocks(size=size))
+    assert cut.info["blocks"] == -(-64 // size) - (size == 1)  # a lone last layer joins
+    assert np.array_equal(cut.vertices, plain.vertices)
+    assert cut.normals.tobytes() == expected.tobytes()
+
+
+def test_other_rules_and_methods_keep_sampling_their_normals():
+    """The trilinear rule (its interior vertices need the samples again),
+    tetrahedra and squares: extract leaves mesh.normals to vertex_normals."""
+    lazy = read_volume(dataset("hydrogen_vtk_64x64x64_float32.raw"))
+    assert lazy.grid is not None
     assert extract(lazy, 0.04, normals=True, ambiguity="trilinear").normals is None
     assert extract(lazy, 0.04, normals=True, method="tetra").normals is None
     one = extract(lazy, 0.04, normals=True)

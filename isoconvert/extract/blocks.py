@@ -76,6 +76,11 @@ from .prepare import (
 from .tables import DEFAULT_AMBIGUITY
 from .trilinear import interior_layer
 
+#: Layers read beyond a slab each way when its filling pass gives normals: one
+#: for a central difference, one for a vertex that rounding through world
+#: coordinates puts in the neighbouring cell (as isoconvert.attributes.HALO).
+NORMALS_HALO = 2
+
 #: Methods that run block-wise, and how many edge directions number their ids.
 BLOCK_METHODS = {"cubes": 3, "tetra": 7, "squares": 3}
 
@@ -218,8 +223,9 @@ class BlockJob:
     #: the vertex offset is the automatic one: a slab with a sample equal to
     #: the level takes NO_DEGENERATE_OFFSET instead of ``offset`` 0
     auto_offset: bool = False
-    #: cubes on a slab that is the whole grid: the filling pass also gives the
-    #: normals, pointing this way (-1.0, or 1.0 with flip); None: no normals
+    #: cubes: the filling pass also gives the normals, pointing this way (-1.0,
+    #: or 1.0 with flip), and the slab is read with a halo (samples_range);
+    #: None: no normals
     normals_sign: float | None = None
 
     @property
@@ -230,6 +236,16 @@ class BlockJob:
     def read_range(self) -> tuple[int, int]:
         """Layers to read, ``[k0, k1 + 1)`` but for the last slab."""
         return self.k0, self.k1 if self.last else self.k1 + 1
+
+    @property
+    def samples_range(self) -> tuple[int, int]:
+        """Layers a local run reads: :attr:`read_range`, and when the filling
+        pass gives normals the :data:`NORMALS_HALO` layers each way (within
+        the grid) that their stencils reach."""
+        lo, hi = self.read_range
+        if self.normals_sign is None:
+            return lo, hi
+        return max(0, lo - NORMALS_HALO), min(self.grid_shape[2], hi + NORMALS_HALO)
 
 
 @dataclass
@@ -309,6 +325,14 @@ def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) 
     from .. import _native
 
     zyx = kernel_type(zyx, job.source)
+    # with normals, zyx comes with its halo (samples_range): the slab is a view
+    # into it
+    with_halo = job.normals_sign is not None
+    halo_lo, _ = job.samples_range
+    read_lo, read_hi = job.read_range
+    halo = zyx
+    if with_halo:
+        zyx = halo[read_lo - halo_lo : read_hi - halo_lo]
     equal_to = equal_target(zyx.dtype, job.level)
 
     def scan(samples: np.ndarray):
@@ -324,8 +348,13 @@ def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) 
             raise nonfinite_error(
                 job.source, rows.nonfinite, "" if whole else f" (z {lo}..{hi - 1})"
             )
-        zyx = _replace_nonfinite(zyx, rows.nonfinite, job.nan_as, job.source)
+        halo = _replace_nonfinite(halo, rows.nonfinite, job.nan_as, job.source)
+        zyx = halo[read_lo - halo_lo : read_hi - halo_lo] if with_halo else halo
         rows = scan(zyx)
+    elif with_halo and job.nan_as is not None and not np.isfinite(halo).all():
+        # NaN/Inf in the halo only: the stencils read them as nan_as too
+        halo = _replace_nonfinite(halo, 1, job.nan_as, job.source)
+        zyx = halo[read_lo - halo_lo : read_hi - halo_lo]
     if job.auto_offset and not job.offset and rows.equal:
         job = replace(job, offset=NO_DEGENERATE_OFFSET)
     equal = rows.equal
@@ -336,9 +365,9 @@ def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) 
         verts, ids, cells = _block_kernel(job).extract(
             zyx, rows, (0, 0, job.k0), allocate or kernel_outputs
         )
-    else:  # the slab is the whole grid (extract_blocks asks only then)
+    else:
         verts, ids, cells, normals = _block_kernel(job).extract_with_normals(
-            zyx, rows, job.normals_sign, allocate or kernel_outputs
+            zyx, rows, job.normals_sign, allocate or kernel_outputs, halo, halo_lo, job.k0
         )
     if job.ambiguity == TRILINEAR and job.method == "cubes":
         # vertices inside cubes have ids past the edge ids, numbered by cube
@@ -569,8 +598,9 @@ class MeshSink:
         self.spilled = False
         # (first vertex, first cell, vertices on the first layer) of each slab
         self.starts: list[tuple[int, int, int]] = []
-        #: the filling pass's normals of a mesh that is one slab, when asked for
-        self.normals: FilledNormals | None = None
+        #: the filling pass's normals of each slab's own vertices, when asked for
+        self.normals: list[np.ndarray] = []
+        self.flat_normals = 0
 
     @property
     def counts(self) -> tuple[int, int]:
@@ -726,8 +756,9 @@ def stitch_blocks(results: Iterable[BlockResult], sink: MeshSink) -> None:
     for result in results:
         if result.vertices is not None:
             sink.put(result)
-        if result.normals is not None:  # one slab, the whole grid: its vertices are the mesh's
-            sink.normals = result.normals
+        if result.normals is not None:  # those of the slab's own vertices, in their order
+            sink.normals.append(result.normals.normals[: result.owned_vertices])
+            sink.flat_normals += result.normals.flat  # overlap vertices too: an upper bound
         vertex_start, cell_start = sink.counts
         if pending is not None:
             _renumber(sink, pending, result.first_ids, vertex_start)
@@ -777,11 +808,11 @@ def run_local(
     slabs = SlabReader(source)
 
     def read(job: BlockJob) -> np.ndarray:
-        return slabs.read(*job.read_range)
+        return slabs.read(*job.samples_range)
 
     def ready(job: BlockJob) -> bool:
         # read ahead, unless that decodes a new chunk row while this one is in use
-        return slabs.ready(*job.read_range)
+        return slabs.ready(*job.samples_range)
 
     for job, zyx in read_ahead(jobs, read, ready):
         result = run_block(adjust(job) if adjust else job, zyx, allocate)
@@ -833,12 +864,10 @@ def extract_blocks(
         Receives the stitched pieces; None keeps them in memory.
     normals : bool
         Give ``mesh.normals`` from the filling pass where it can: Marching
-        Cubes with a fixed ambiguity rule, run here, on a volume that is one
-        slab (it fits the memory budget), the usual case of a volume read from
-        its file. A gradient's stencil reaches one sample past an edge's ends,
-        and a slab holds one sample beyond its own layers: several slabs (and
-        trilinear interior vertices, tetrahedra, slabs on a cluster) leave
-        ``mesh.normals`` None, for :func:`isoconvert.vertex_normals`.
+        Cubes with a fixed ambiguity rule, slabs run here (each read with
+        :data:`NORMALS_HALO` more layers each way, which the gradients'
+        stencils reach). The trilinear rule, tetrahedra and slabs on a cluster
+        leave ``mesh.normals`` None, for :func:`isoconvert.vertex_normals`.
 
     Returns
     -------
@@ -881,14 +910,9 @@ def extract_blocks(
             ranges = slab_ranges(volume.shape[2], layers)
     else:
         runner = None
-    # normals in the filling pass: a single slab holds the whole grid
-    fill_normals = (
-        normals
-        and method == "cubes"
-        and ambiguity != TRILINEAR
-        and runner is None
-        and len(ranges) == 1
-    )
+    # normals in the filling pass (slabs read here, with their halo; not the
+    # trilinear rule's interior vertices, which would need the samples again)
+    fill_normals = normals and method == "cubes" and ambiguity != TRILINEAR and runner is None
     threads = kernel_threads()
     while True:
         template = BlockJob(
@@ -934,9 +958,11 @@ def extract_blocks(
         volume, method, level, flip, stats.offset, None if method == "tetra" else ambiguity
     )
     info["blocks"] = len(ranges)
-    filled = out.normals
+    pieces, flat = out.normals, out.flat_normals
     mesh = out.mesh(info)
-    if filled is not None and mesh.n_cells:  # as vertex_normals: only with triangles
+    if fill_normals and mesh.n_cells:  # as vertex_normals: only with triangles
+        filled = FilledNormals(pieces[0] if len(pieces) == 1 else np.concatenate(pieces), flat)
+        assert len(filled.normals) == mesh.n_vertices
         mesh.normals = fill_pass_normals(
             mesh, filled, None, _block_kernel(template), template.normals_sign, threads
         )

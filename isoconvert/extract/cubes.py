@@ -254,23 +254,39 @@ class CubesBlock(Block):
         return verts, edge_ids, tris
 
     def extract_with_normals(
-        self, samples: np.ndarray, scan: object, sign: float, allocate: Allocate = kernel_outputs
+        self,
+        samples: np.ndarray,
+        scan: object,
+        sign: float,
+        allocate: Allocate = kernel_outputs,
+        halo: np.ndarray | None = None,
+        halo_k0: int = 0,
+        k0: int = 0,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, FilledNormals]:
-        """:meth:`extract` on the whole grid, and the normals of its edge vertices.
+        """:meth:`extract` on the whole grid or a z-slab of it, and the normals
+        of its edge vertices.
 
-        The normals come from the filling pass (see :func:`fill_pass_normals`);
-        their stencils reach one sample past an edge's ends, which a block's
-        one-sample overlap does not hold, so this is for the whole grid only
-        (block-wise runs sample their normals after extraction).
+        The normals come from the filling pass (see :func:`fill_pass_normals`).
+        Their stencils reach one sample past an edge's ends, beyond a slab's
+        one-sample overlap, and a vertex that rounding puts in the next cell
+        one sample more: a slab comes with up to 2 more layers each way.
 
         Parameters
         ----------
         samples, scan
-            As for :meth:`extract`, of the whole grid.
+            As for :meth:`extract`: the whole grid, or a z-slab given as a view
+            into ``halo``.
         sign : float
             -1.0 (normals from values >= level to values < level) or 1.0 (``flip``).
         allocate : callable
             As for :meth:`extract`.
+        halo : (L, Y, X) array or None
+            For a slab: its samples with up to 2 more layers each way (within
+            the grid), NaN/Inf replaced as in ``samples``; None for the grid.
+        halo_k0 : int
+            Grid layer of ``halo[0]``.
+        k0 : int
+            Grid layer of ``samples[0]``.
 
         Returns
         -------
@@ -280,7 +296,9 @@ class CubesBlock(Block):
             Unit world normals of the vertices on grid edges, and how many of
             them failed.
         """
-        return self._fill(samples, scan, (0, 0, 0), allocate, sign)
+        if halo is None:
+            return self._fill(samples, scan, (0, 0, 0), allocate, sign, samples, 0)
+        return self._fill(samples, scan, (0, 0, k0), allocate, sign, halo, halo_k0)
 
     def _fill(
         self,
@@ -289,8 +307,11 @@ class CubesBlock(Block):
         index_origin: tuple[int, int, int],
         allocate: Allocate,
         sign: float | None = None,
+        halo: np.ndarray | None = None,
+        halo_k0: int = 0,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, FilledNormals | None]:
-        """Count, allocate and fill; normals too when ``sign`` is given."""
+        """Count, allocate and fill; normals too when ``sign`` is given (their
+        stencils read ``halo``, see :meth:`extract_with_normals`)."""
         from .. import _native
 
         trilinear = self.ambiguity == TRILINEAR
@@ -321,6 +342,9 @@ class CubesBlock(Block):
             sign or 0.0,
             SLACK,
             normals,
+            samples if halo is None else halo,
+            halo_k0,
+            self.grid_shape[2],
         )
         if sign is None:
             return verts, edge_ids, tris, None
