@@ -145,11 +145,12 @@ def extract(
         Give ``mesh.normals`` (those of :func:`isoconvert.vertex_normals`, the
         same bits) where the extraction computes them in its filling pass, from
         the gradients at the ends of each bipolar edge: Marching Cubes on a
-        volume in memory, or read from its file as one slab (see
+        volume in memory, or block-wise with its slabs run here (each read with
+        2 more layers each way, see
         :func:`~isoconvert.extract.blocks.extract_blocks`). Elsewhere
         ``mesh.normals`` stays None, for ``vertex_normals`` to sample after
-        extraction: runs of several slabs (their overlap is one sample, and a
-        gradient's stencil reaches one more), tetrahedra (vertices on cube
+        extraction: block-wise with the trilinear rule (its interior vertices
+        need the samples again) or on a cluster, tetrahedra (vertices on cube
         diagonals, where the gradient is not linear along the edge), squares
         and plugins. A mesh without triangles gets none either.
 
