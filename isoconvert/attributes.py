@@ -9,6 +9,13 @@ normals are the central-difference gradients at the edge's two samples mixed
 by the vertex's place on the edge, as VTK's contour filters and scikit-image
 compute them. At vertices that smoothing or decimation moved, it is the
 gradient field of the trilinear interpolant.
+
+Marching Cubes computes the same normals (the same bits, through the same
+per-point code, src/sample.hpp) in its filling pass when asked
+(``extract(..., normals=True)``, which ``convert`` and
+:func:`isoconvert.marching_cubes` use); this second pass remains for the rest:
+meshes after post-processing, tetrahedra, the trilinear rule block-wise, runs
+on a cluster, and any mesh a caller brings.
 """
 
 from __future__ import annotations
