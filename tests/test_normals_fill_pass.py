@@ -143,6 +143,28 @@ def test_float_scan_with_nan_samples(flip):
     assert angles.max() <= TOLERANCE_DEGREES, angles.max()
 
 
+@pytest.mark.parametrize("blocks", [None, 8], ids=["in-memory", "slabs"])
+def test_a_nan_as_float32_cannot_hold_keeps_the_second_pass(blocks):
+    """nan_as 0.1 on float32 samples: the extraction reads float32(0.1) where
+    the second pass reads 0.1, and near the NaN samples the normals would
+    differ by some 1e-6 degrees; such runs keep the second pass, and callers
+    (arrays API, convert) get exactly vertex_normals' normals."""
+    from isoconvert.extract.blocks import Blocks
+
+    volume = in_memory(read_volume(dataset("hydrogen_vtk_64x64x64_float32.raw")), True)
+    data = np.array(volume.data)
+    data[20:30, 25:33, 28:36] = np.nan
+    volume = dataclasses.replace(volume, data=data)
+    given = {} if blocks is None else {"blocks": Blocks(size=blocks)}
+    assert extract(volume, 0.04, nan_as=0.1, normals=True, **given).normals is None
+    assert extract(volume, 0.04, nan_as=0.5, normals=True, **given).normals is not None
+    zyx = np.ascontiguousarray(data.T)
+    mesh = array_marching_cubes(zyx, 0.04, normals=True, nan_as=0.1)
+    plain = Volume.from_zyx(zyx)
+    expected = vertex_normals(extract(plain, 0.04, nan_as=0.1), plain, nan_as=0.1)
+    assert mesh.normals.tobytes() == expected.tobytes()
+
+
 @pytest.mark.parametrize("ambiguity", CUBE_AMBIGUITY_RULES)
 def test_every_ambiguity_rule(ambiguity):
     """Fixed rules put every vertex on a grid edge; the trilinear rule adds

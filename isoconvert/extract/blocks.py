@@ -60,7 +60,7 @@ from ..runner import Task, TaskFailure, cluster_size, run_in_order, worker_threa
 from ..runner.local import read_ahead
 from ..threads import kernel_threads
 from ..volume import ValueRange, Volume
-from .cubes import FilledNormals, fill_pass_normals
+from .cubes import FilledNormals, fill_pass_normals, nan_as_exact
 from .placement import Allocate, kernel_outputs, mesh_info, reversed_orientation
 from .prepare import (
     _replace_nonfinite,
@@ -866,8 +866,10 @@ def extract_blocks(
         Give ``mesh.normals`` from the filling pass where it can: Marching
         Cubes with a fixed ambiguity rule, slabs run here (each read with
         :data:`NORMALS_HALO` more layers each way, which the gradients'
-        stencils reach). The trilinear rule, tetrahedra and slabs on a cluster
-        leave ``mesh.normals`` None, for :func:`isoconvert.vertex_normals`.
+        stencils reach). The trilinear rule, tetrahedra, slabs on a cluster and
+        a ``nan_as`` with no exact twin in the sample type
+        (:func:`~isoconvert.extract.cubes.nan_as_exact`) leave ``mesh.normals``
+        None, for :func:`isoconvert.vertex_normals`.
 
     Returns
     -------
@@ -912,7 +914,13 @@ def extract_blocks(
         runner = None
     # normals in the filling pass (slabs read here, with their halo; not the
     # trilinear rule's interior vertices, which would need the samples again)
-    fill_normals = normals and method == "cubes" and ambiguity != TRILINEAR and runner is None
+    fill_normals = (
+        normals
+        and method == "cubes"
+        and ambiguity != TRILINEAR
+        and runner is None
+        and nan_as_exact(dtype, nan_as)
+    )
     threads = kernel_threads()
     while True:
         template = BlockJob(

@@ -62,7 +62,9 @@ def marching_cubes(
         Also give ``mesh.normals`` (when there are triangles): the normals of
         :func:`isoconvert.vertex_normals`, computed in the filling pass from
         the gradients at the two ends of each bipolar edge instead of by a
-        second pass over the volume (see :func:`fill_pass_normals`).
+        second pass over the volume (see :func:`fill_pass_normals`); not
+        when ``nan_as`` has no exact twin in the sample type
+        (:func:`nan_as_exact`), which leaves ``mesh.normals`` None.
 
     Returns
     -------
@@ -80,7 +82,7 @@ def marching_cubes(
         volume, 3, "cubes", level, nan_as=nan_as, vertex_offset=vertex_offset, on_status=on_status
     )
     block = CubesBlock.whole(volume, prep.offset, flip, prep.threads, ambiguity=ambiguity)
-    if not normals:
+    if not normals or not nan_as_exact(prep.array.dtype, nan_as):
         verts, edge_ids, tris = block.extract(prep.array, prep.scan)
         return Mesh(
             verts,
@@ -112,6 +114,21 @@ class FilledNormals(NamedTuple):
 
     normals: np.ndarray
     flat: int
+
+
+def nan_as_exact(dtype: np.dtype, nan_as: float | None) -> bool:
+    """Whether NaN/Inf samples replaced by ``nan_as`` in ``dtype`` (as
+    :func:`~isoconvert.extract.prepare.prepare` does) read as ``nan_as`` itself.
+
+    The filling pass reads the replaced samples; ``vertex_normals`` reads the
+    volume and puts the float64 ``nan_as`` in their place. They agree unless
+    ``nan_as`` has no exact twin in the sample type (0.1 in float32), and only
+    then do normals near NaN samples differ (by some 1e-6 degrees): those
+    runs keep the second pass, so that ``--normals`` stays what it was.
+    """
+    if nan_as is None or not np.issubdtype(dtype, np.floating):
+        return True
+    return float(dtype.type(nan_as)) == nan_as
 
 
 #: How far outside a grid (in samples) a point may be and still be sampled on
