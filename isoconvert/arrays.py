@@ -103,8 +103,8 @@ def marching_cubes(
     if level is None:
         array = np.asarray(volume_zyx)
         level = 0.5 * (float(np.nanmin(array)) + float(np.nanmax(array)))
-    mesh = extract(volume, level, method=method, flip=flip, **options)
-    if normals and len(mesh.cells):
+    mesh = extract(volume, level, method=method, flip=flip, normals=normals, **options)
+    if normals and len(mesh.cells) and mesh.normals is None:  # not from the filling pass
         mesh.normals = vertex_normals(mesh, volume, flip=flip, nan_as=options.get("nan_as"))
     return mesh
 

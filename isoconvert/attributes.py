@@ -9,6 +9,13 @@ normals are the central-difference gradients at the edge's two samples mixed
 by the vertex's place on the edge, as VTK's contour filters and scikit-image
 compute them. At vertices that smoothing or decimation moved, it is the
 gradient field of the trilinear interpolant.
+
+Marching Cubes computes the same normals (the same bits, through the same
+per-point code, src/sample.hpp) in its filling pass when asked
+(``extract(..., normals=True)``, which ``convert`` and
+:func:`isoconvert.marching_cubes` use); this second pass remains for the rest:
+meshes after post-processing, tetrahedra, the trilinear rule block-wise, runs
+on a cluster, and any mesh a caller brings.
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import VolumeError
+from .extract.cubes import SLACK, gradient_maps
 from .extract.prepare import kernel_type
 from .grid import grid_slab_zyx
 from .memory import row_chunks
@@ -29,10 +37,6 @@ SLAB_LAYERS = 64
 #: Layers read below and above each slab: one for a central difference, one
 #: for a point the kernel places in the neighbouring cell by rounding.
 HALO = 2
-
-#: How far outside a grid (in samples) a point may be and still be sampled on
-#: its face (rounding of world coordinates); beyond it, the value is NaN.
-SLACK = 1e-6
 
 
 def check_3d(volume: Volume, what: str) -> None:
@@ -58,10 +62,9 @@ def _sample(
 
     out = np.empty((len(vertices), 3) if gradient else len(vertices), dtype=np.float32)
     depth = volume.shape[2]
-    to_index = np.linalg.inv(volume.affine)
     origin = np.ascontiguousarray(volume.origin, dtype=np.float64)
-    # (row vectors) index = (world - origin) @ inv(affine).T; d/d(world) = d/d(index) @ inv(affine)
-    maps = (origin, np.ascontiguousarray(to_index.T), np.ascontiguousarray(to_index))
+    maps = (origin, *gradient_maps(volume.affine))
+    to_index = maps[2]  # inv(affine): a point's index z is (world - origin) @ to_index[2]
     threads = kernel_threads()
 
     def run(zyx: np.ndarray, k0: int, points: np.ndarray, into: np.ndarray) -> None:

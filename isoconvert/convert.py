@@ -429,8 +429,9 @@ def _extract_and_write(
         blocks = replace(blocks, spill_dir=Path(folder).resolve())
     mesh, extracted = _extract(volume, level, replace(opts, blocks=blocks), on_status, progress)
     if opts.normals and len(mesh.cells):
-        progress("normals")
-        mesh.normals = vertex_normals(mesh, volume, flip=opts.flip, nan_as=opts.nan_as)
+        if mesh.normals is None:  # not from the filling pass: sample them
+            progress("normals")
+            mesh.normals = vertex_normals(mesh, volume, flip=opts.flip, nan_as=opts.nan_as)
         mesh.info["normals"] = "volume gradient"
     if value_volume is not None:
         progress("values")
@@ -471,6 +472,9 @@ def _extract(
         nan_as=opts.nan_as,
         on_status=on_status,
         blocks=opts.blocks,
+        # from the filling pass where extract can (Marching Cubes in memory),
+        # unless post-processing moves the vertices before the normals are due
+        normals=opts.normals and not opts.post.steps,
         **method_options,
     )
     extracted = None

@@ -6,6 +6,7 @@
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/tuple.h>
 
+#include <atomic>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -182,7 +183,9 @@ void bind_sample_type(nb::module_ &m) {
       [](Samples3<T> f, const iso::RowScan &s, const iso::CubesCount &n, Int64s counts,
          Int64s edges, const iso::TrilinearTable *trilinear, i64 inner_base, Doubles affine,
          Doubles origin, Int64s index_origin, Int64s id_dims, double offset, bool reverse,
-         int threads, Out<double> verts, Out<i64> ids, Out<i64> tris) {
+         int threads, Out<double> verts, Out<i64> ids, Out<i64> tris, Doubles to_index,
+         Doubles to_world, double sign, double slack, Out<float> normals, Samples3<T> halo,
+         i64 halo_k0, i64 depth) {
         check_shape(f, s);
         if (i64(n.cy.size()) != s.rows()) {
           throw std::invalid_argument("counts are from another row scan");
@@ -196,14 +199,66 @@ void bind_sample_type(nb::module_ &m) {
         const iso::CubeTable table = cube_table(counts, edges);
         iso::Placement w = placement(affine, origin, index_origin, id_dims, offset, reverse);
         w.inner_base = inner_base;
-        nb::gil_scoped_release unlocked;
-        iso::fill_cubes<T>(f.data(), s, table, trilinear, n, w, threads, verts.data(),
-                           ids.data(), tris.data());
+        // normals: to_world (3, 3) asks for them (none: 0 values); their
+        // stencils take the samples as the whole grid, so the block must be it
+        iso::EdgeNormals edge_normals;
+        std::atomic<i64> flat{0};
+        std::atomic<bool> missing{false};
+        const bool with_normals = to_world.size() != 0;
+        if (with_normals) {
+          check_out(normals, n.vertices, 3, "normals");
+          if (to_index.size() != 9 || to_world.size() != 9) {
+            throw std::invalid_argument("to_index and to_world are (3, 3)");
+          }
+          // a z-slab of the grid, inside its halo, inside the grid
+          const i64 k0 = w.index_origin[2], layers = i64(halo.shape(0));
+          if (w.index_origin[0] || w.index_origin[1] || w.id_dims[0] != s.nx ||
+              w.id_dims[1] != s.ny || i64(halo.shape(1)) != s.ny ||
+              i64(halo.shape(2)) != s.nx || halo_k0 < 0 || halo_k0 > k0 ||
+              halo_k0 + layers < k0 + s.nz || halo_k0 + layers > depth) {
+            throw std::invalid_argument("normals in the fill pass: a z-slab and its halo");
+          }
+          edge_normals.halo = halo.data();
+          edge_normals.halo_layers = layers;
+          edge_normals.halo_k0 = halo_k0;
+          edge_normals.depth = depth;
+          edge_normals.missing = &missing;
+          for (int a = 0; a < 3; ++a) {
+            edge_normals.map.origin[a] = origin.data()[a];
+            for (int b = 0; b < 3; ++b) {
+              edge_normals.map.to_index[a][b] = to_index.data()[3 * a + b];
+              edge_normals.map.to_world[a][b] = to_world.data()[3 * a + b];
+            }
+          }
+          edge_normals.map.sign = sign;
+          edge_normals.map.normalize = true;
+          edge_normals.slack = slack;
+          edge_normals.out = normals.data();
+          edge_normals.flat = &flat;
+        }
+        {
+          nb::gil_scoped_release unlocked;
+          iso::fill_cubes<T>(f.data(), s, table, trilinear, n, w, threads, verts.data(),
+                             ids.data(), tris.data(), with_normals ? &edge_normals : nullptr);
+        }
+        if (missing.load()) {
+          throw std::logic_error("fill_cubes: a normal's stencil left the slab's halo");
+        }
+        return flat.load();
       },
       "f"_a.noconvert(), "scan"_a, "n"_a, "counts"_a, "edges"_a, "trilinear"_a.none(),
       "inner_base"_a, "affine"_a, "origin"_a,
       "index_origin"_a, "id_dims"_a, "offset"_a, "reverse"_a, "threads"_a,
-      "verts"_a.noconvert(), "ids"_a.noconvert(), "tris"_a.noconvert());
+      "verts"_a.noconvert(), "ids"_a.noconvert(), "tris"_a.noconvert(), "to_index"_a,
+      "to_world"_a, "sign"_a, "slack"_a, "normals"_a.noconvert(), "halo"_a.noconvert(),
+      "halo_k0"_a, "depth"_a,
+      "Fill the vertices, edge ids and triangles the counts call for. With to_index\n"
+      "and to_world (3, 3) (empty for none; as sample_points takes them) also the\n"
+      "unit normals (V, 3) float32 of the vertices on grid edges, as sample_points\n"
+      "gives them at the vertices (0 where the gradient vanishes, NaN where it is\n"
+      "not finite); interior vertices are left as they are. The stencils read `halo`,\n"
+      "layers halo_k0.. of the grid's `depth` around the slab (f itself for the grid).\n"
+      "Returns how many normals are 0 or NaN (0 without normals).");
 }
 
 }  // namespace

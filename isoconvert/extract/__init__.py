@@ -108,6 +108,7 @@ def extract(
     nan_as: float | None = None,
     on_status: Callable[[str], None] | None = None,
     blocks: Blocks | None = None,
+    normals: bool = False,
     **options,
 ) -> Mesh:
     """Extract the isosurface (or isocontour) of ``volume`` at ``level``.
@@ -140,6 +141,18 @@ def extract(
         zero-length edges). Left out or None, it is :data:`NO_DEGENERATE_OFFSET`
         when some sample equals the level and 0 otherwise (a notice says so);
         0 places every vertex exactly by linear interpolation.
+    normals : bool
+        Give ``mesh.normals`` (those of :func:`isoconvert.vertex_normals`, the
+        same bits) where the extraction computes them in its filling pass, from
+        the gradients at the ends of each bipolar edge: Marching Cubes on a
+        volume in memory, or block-wise with its slabs run here (each read with
+        2 more layers each way, see
+        :func:`~isoconvert.extract.blocks.extract_blocks`). Elsewhere
+        ``mesh.normals`` stays None, for ``vertex_normals`` to sample after
+        extraction: block-wise with the trilinear rule (its interior vertices
+        need the samples again) or on a cluster, tetrahedra (vertices on cube
+        diagonals, where the gradient is not linear along the edge), squares
+        and plugins. A mesh without triangles gets none either.
 
     Returns
     -------
@@ -180,6 +193,7 @@ def extract(
             nan_as=nan_as,
             blocks=blocks,
             on_status=on_status,
+            normals=normals,
             **options,
         )
     placement_note = None
@@ -189,6 +203,8 @@ def extract(
         options["vertex_offset"], placement_note = resolve_vertex_offset(
             volume.dtype, float(level), given, equal
         )
+    if normals and extractor.run is marching_cubes:
+        options["normals"] = True
     mesh = extractor.run(
         volume,
         float(level),

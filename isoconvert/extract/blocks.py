@@ -60,6 +60,7 @@ from ..runner import Task, TaskFailure, cluster_size, run_in_order, worker_threa
 from ..runner.local import read_ahead
 from ..threads import kernel_threads
 from ..volume import ValueRange, Volume
+from .cubes import FilledNormals, fill_pass_normals, nan_as_exact
 from .placement import Allocate, kernel_outputs, mesh_info, reversed_orientation
 from .prepare import (
     _replace_nonfinite,
@@ -74,6 +75,11 @@ from .prepare import (
 )
 from .tables import DEFAULT_AMBIGUITY
 from .trilinear import interior_layer
+
+#: Layers read beyond a slab each way when its filling pass gives normals: one
+#: for a central difference, one for a vertex that rounding through world
+#: coordinates puts in the neighbouring cell (as isoconvert.attributes.HALO).
+NORMALS_HALO = 2
 
 #: Methods that run block-wise, and how many edge directions number their ids.
 BLOCK_METHODS = {"cubes": 3, "tetra": 7, "squares": 3}
@@ -217,6 +223,10 @@ class BlockJob:
     #: the vertex offset is the automatic one: a slab with a sample equal to
     #: the level takes NO_DEGENERATE_OFFSET instead of ``offset`` 0
     auto_offset: bool = False
+    #: cubes: the filling pass also gives the normals, pointing this way (-1.0,
+    #: or 1.0 with flip), and the slab is read with a halo (samples_range);
+    #: None: no normals
+    normals_sign: float | None = None
 
     @property
     def last(self) -> bool:
@@ -226,6 +236,16 @@ class BlockJob:
     def read_range(self) -> tuple[int, int]:
         """Layers to read, ``[k0, k1 + 1)`` but for the last slab."""
         return self.k0, self.k1 if self.last else self.k1 + 1
+
+    @property
+    def samples_range(self) -> tuple[int, int]:
+        """Layers a local run reads: :attr:`read_range`, and when the filling
+        pass gives normals the :data:`NORMALS_HALO` layers each way (within
+        the grid) that their stencils reach."""
+        lo, hi = self.read_range
+        if self.normals_sign is None:
+            return lo, hi
+        return max(0, lo - NORMALS_HALO), min(self.grid_shape[2], hi + NORMALS_HALO)
 
 
 @dataclass
@@ -258,6 +278,8 @@ class BlockResult:
         Owned samples equal to the level.
     offset : float
         The vertex offset the slab's vertices were placed with.
+    normals : FilledNormals or None
+        The filling pass's normals, when the job asked for them.
     """
 
     k0: int
@@ -272,6 +294,7 @@ class BlockResult:
     max: float
     equal: int
     offset: float = 0.0
+    normals: FilledNormals | None = None
 
 
 def read_block(source: np.ndarray | LazyGrid, job: BlockJob) -> np.ndarray:
@@ -302,6 +325,14 @@ def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) 
     from .. import _native
 
     zyx = kernel_type(zyx, job.source)
+    # with normals, zyx comes with its halo (samples_range): the slab is a view
+    # into it
+    with_halo = job.normals_sign is not None
+    halo_lo, _ = job.samples_range
+    read_lo, read_hi = job.read_range
+    halo = zyx
+    if with_halo:
+        zyx = halo[read_lo - halo_lo : read_hi - halo_lo]
     equal_to = equal_target(zyx.dtype, job.level)
 
     def scan(samples: np.ndarray):
@@ -317,16 +348,27 @@ def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) 
             raise nonfinite_error(
                 job.source, rows.nonfinite, "" if whole else f" (z {lo}..{hi - 1})"
             )
-        zyx = _replace_nonfinite(zyx, rows.nonfinite, job.nan_as, job.source)
+        halo = _replace_nonfinite(halo, rows.nonfinite, job.nan_as, job.source)
+        zyx = halo[read_lo - halo_lo : read_hi - halo_lo] if with_halo else halo
         rows = scan(zyx)
+    elif with_halo and job.nan_as is not None and not np.isfinite(halo).all():
+        # NaN/Inf in the halo only: the stencils read them as nan_as too
+        halo = _replace_nonfinite(halo, 1, job.nan_as, job.source)
+        zyx = halo[read_lo - halo_lo : read_hi - halo_lo]
     if job.auto_offset and not job.offset and rows.equal:
         job = replace(job, offset=NO_DEGENERATE_OFFSET)
     equal = rows.equal
     if equal and not job.last:  # the overlap layer's samples are the next slab's
         equal -= int(np.count_nonzero(zyx[-1] == zyx.dtype.type(equal_to)))
-    verts, ids, cells = _block_kernel(job).extract(
-        zyx, rows, (0, 0, job.k0), allocate or kernel_outputs
-    )
+    normals = None
+    if job.normals_sign is None:
+        verts, ids, cells = _block_kernel(job).extract(
+            zyx, rows, (0, 0, job.k0), allocate or kernel_outputs
+        )
+    else:
+        verts, ids, cells, normals = _block_kernel(job).extract_with_normals(
+            zyx, rows, job.normals_sign, allocate or kernel_outputs, halo, halo_lo, job.k0
+        )
     if job.ambiguity == TRILINEAR and job.method == "cubes":
         # vertices inside cubes have ids past the edge ids, numbered by cube
         layer = interior_layer(ids, job.grid_shape)
@@ -353,6 +395,7 @@ def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) 
         max=float(rows.max),
         equal=int(equal),
         offset=job.offset,
+        normals=normals,
     )
 
 
@@ -555,6 +598,9 @@ class MeshSink:
         self.spilled = False
         # (first vertex, first cell, vertices on the first layer) of each slab
         self.starts: list[tuple[int, int, int]] = []
+        #: the filling pass's normals of each slab's own vertices, when asked for
+        self.normals: list[np.ndarray] = []
+        self.flat_normals = 0
 
     @property
     def counts(self) -> tuple[int, int]:
@@ -710,6 +756,9 @@ def stitch_blocks(results: Iterable[BlockResult], sink: MeshSink) -> None:
     for result in results:
         if result.vertices is not None:
             sink.put(result)
+        if result.normals is not None:  # those of the slab's own vertices, in their order
+            sink.normals.append(result.normals.normals[: result.owned_vertices])
+            sink.flat_normals += result.normals.flat  # overlap vertices too: an upper bound
         vertex_start, cell_start = sink.counts
         if pending is not None:
             _renumber(sink, pending, result.first_ids, vertex_start)
@@ -759,11 +808,11 @@ def run_local(
     slabs = SlabReader(source)
 
     def read(job: BlockJob) -> np.ndarray:
-        return slabs.read(*job.read_range)
+        return slabs.read(*job.samples_range)
 
     def ready(job: BlockJob) -> bool:
         # read ahead, unless that decodes a new chunk row while this one is in use
-        return slabs.ready(*job.read_range)
+        return slabs.ready(*job.samples_range)
 
     for job, zyx in read_ahead(jobs, read, ready):
         result = run_block(adjust(job) if adjust else job, zyx, allocate)
@@ -787,6 +836,7 @@ def extract_blocks(
     blocks: Blocks | None = None,
     on_status: Callable[[str], None] | None = None,
     sink: MeshSink | None = None,
+    normals: bool = False,
 ) -> Mesh:
     """Extract the isosurface of a 3D volume slab by slab; the same mesh as the
     in-memory path (:func:`isoconvert.extract`), bit for bit.
@@ -812,6 +862,14 @@ def extract_blocks(
         Slab size, memory budget, and a Dask scheduler to run on.
     sink : MeshSink or None
         Receives the stitched pieces; None keeps them in memory.
+    normals : bool
+        Give ``mesh.normals`` from the filling pass where it can: Marching
+        Cubes with a fixed ambiguity rule, slabs run here (each read with
+        :data:`NORMALS_HALO` more layers each way, which the gradients'
+        stencils reach). The trilinear rule, tetrahedra, slabs on a cluster and
+        a ``nan_as`` with no exact twin in the sample type
+        (:func:`~isoconvert.extract.cubes.nan_as_exact`) leave ``mesh.normals``
+        None, for :func:`isoconvert.vertex_normals`.
 
     Returns
     -------
@@ -854,6 +912,15 @@ def extract_blocks(
             ranges = slab_ranges(volume.shape[2], layers)
     else:
         runner = None
+    # normals in the filling pass (slabs read here, with their halo; not the
+    # trilinear rule's interior vertices, which would need the samples again)
+    fill_normals = (
+        normals
+        and method == "cubes"
+        and ambiguity != TRILINEAR
+        and runner is None
+        and nan_as_exact(dtype, nan_as)
+    )
     threads = kernel_threads()
     while True:
         template = BlockJob(
@@ -872,6 +939,7 @@ def extract_blocks(
             threads=threads,
             source=volume.source,
             auto_offset=auto and can_equal and not offset,
+            normals_sign=(1.0 if flip else -1.0) if fill_normals else None,
         )
         jobs = [replace(template, k0=k0, k1=k1) for k0, k1 in ranges]
         out = sink or MeshSink(arity, blocks.spill_dir, blocks.budget // 4)
@@ -898,7 +966,14 @@ def extract_blocks(
         volume, method, level, flip, stats.offset, None if method == "tetra" else ambiguity
     )
     info["blocks"] = len(ranges)
+    pieces, flat = out.normals, out.flat_normals
     mesh = out.mesh(info)
+    if fill_normals and mesh.n_cells:  # as vertex_normals: only with triangles
+        filled = FilledNormals(pieces[0] if len(pieces) == 1 else np.concatenate(pieces), flat)
+        assert len(filled.normals) == mesh.n_vertices
+        mesh.normals = fill_pass_normals(
+            mesh, filled, None, _block_kernel(template), template.normals_sign, threads
+        )
     if method == "squares" and mesh.n_cells == 0:
         raise IsoconvertError(f"{volume.source}: no slice crosses level {level:g}")
     if note and on_status:
