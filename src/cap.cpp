@@ -55,7 +55,6 @@ using namespace iso::bind;
 struct Table {
   int count;
   int slots[4][3];
-  int used;  // bit s set when slot s appears
 };
 
 // A cell's group: its case, or under the decider 16 + (case == 10) for an
@@ -64,11 +63,11 @@ struct Table {
 constexpr int kGroups = 18;
 constexpr int kOrder[17] = {1, 2, 3, 4, 16, 5, 6, 7, 8, 9, 17, 10, 11, 12, 13, 14, 15};
 
-// Corners of a face cell in cyclic order, the lower end of each edge, and
-// which edges run along q (cap.py's numbering).
-constexpr int kCorner[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
-constexpr int kEdgeLow[4][2] = {{0, 0}, {1, 0}, {0, 1}, {0, 0}};
-constexpr bool kAlongQ[4] = {false, true, false, true};
+// A face cell's slots (cap.py's numbering): corners 0-3 at (p, q) + (0, 0),
+// (1, 0), (1, 1), (0, 1); 4 + c the crossing of the edge from corner c to
+// c + 1: along p from (0, 0), along q from (1, 0), along p from (0, 1), along
+// q from (0, 0). A sample's vertex number is the count of positive boundary
+// samples before it in linear order (after the surface's vertices).
 
 // Work per task: enough to pay for handing it out, little enough that two
 // threads share one face (cells) or one plane of the boundary (samples).
@@ -151,16 +150,17 @@ struct Grid {
   }
 };
 
-// x / d for 0 <= x < 2^52 by a double division, corrected: a 64-bit integer
-// division per vertex was most of the time of decoding the surface's ids.
+// x / d for 0 <= x < 2^52 by a double division, corrected (the estimate is off
+// by at most one): a 64-bit integer division per vertex was most of the time
+// of decoding the surface's ids.
 struct Divider {
   i64 d;
   double inverse;
   explicit Divider(i64 d_) : d(d_), inverse(1.0 / double(d_)) {}
   i64 quotient(i64 x) const {
     i64 q = i64(double(x) * inverse);
-    while (q * d > x) --q;
-    while ((q + 1) * d <= x) ++q;
+    q -= q * d > x;
+    q += (q + 1) * d <= x;
     return q;
   }
 };
@@ -236,7 +236,7 @@ struct Bits {
     bits.assign(size_t((n + 63) / 64), 0);
     before.resize(bits.size() + 1);
   }
-  void set(i64 b) { bits[size_t(b >> 6)] |= std::uint64_t(1) << (b & 63); }
+  void set_to(i64 b, bool on) { bits[size_t(b >> 6)] |= std::uint64_t(on) << (b & 63); }
   bool test(i64 b) const { return bits[size_t(b >> 6)] >> (b & 63) & 1; }
   void count() {
     before[0] = 0;
@@ -302,13 +302,14 @@ bool fill(const Grid &g, double level, const Table tables[kGroups], const std::u
       b.q_edges.resize(np * (nq - 1));
       b.words = t >= 2 ? (np + 63) / 64 : 0;  // the x faces' rows are two samples
       b.columns.resize(nq * 64 * b.words);
+      // without branches: signs change at random across a face
       for (i64 p = 0; p < np; ++p) {
         const double *v = F.values + p * nq;
         for (i64 q = 0; q < nq; ++q) {
           const bool positive = v[q] >= level;
-          if (t >= 2 && positive) b.columns.set(q * 64 * b.words + p);
-          if (q + 1 < nq && positive != (v[q + 1] >= level)) b.q_edges.set(p * (nq - 1) + q);
-          if (p + 1 < np && positive != (v[q + nq] >= level)) b.p_edges.set(p * nq + q);
+          if (b.words) b.columns.set_to(q * 64 * b.words + p, positive);
+          if (q + 1 < nq) b.q_edges.set_to(p * (nq - 1) + q, positive != (v[q + 1] >= level));
+          if (p + 1 < np) b.p_edges.set_to(p * nq + q, positive != (v[q + nq] >= level));
         }
       }
       b.columns.count();
@@ -321,19 +322,6 @@ bool fill(const Grid &g, double level, const Table tables[kGroups], const std::u
     b.first_slot = n_bipolar;
     n_bipolar += b.p_edges.total() + b.q_edges.total();
   }
-  // The vertex number of a face's positive sample (p, q): after the positive
-  // samples of the rows before its own, and of its own row before it.
-  auto sample_number = [&](int f, i64 p, i64 q) -> i64 {
-    const Face &F = g.faces[f];
-    if (f < 2) {  // the first or last sample of row (j, k) = (p, q)
-      const i64 r = p + Y * q;
-      return row_start[r] + (F.side == 0 ? 0 : row_counts[r] - 1);
-    }
-    const i64 r = f < 4 ? F.side + Y * q : q + Y * F.side;
-    const Bits &column = fb[f].columns;
-    const i64 start = q * 64 * fb[f].words;
-    return row_start[r] + column.rank(start + p) - column.rank(start);
-  };
   // 1 + the first vertex of the surface on each bipolar edge (0: none)
   std::unique_ptr<std::atomic<i64>[]> edge_slot(
       new std::atomic<i64>[size_t(std::max<i64>(n_bipolar, 1))]);
@@ -386,16 +374,26 @@ bool fill(const Grid &g, double level, const Table tables[kGroups], const std::u
   const i64 n_edge_ids = 3 * X * Y * Z;
   const Divider by_x(X), by_y(Y);
   iso::parallel_for(V, threads, kGrain, [&](int, i64 begin, i64 end) {
+    // the row (j, k) of the last vertex: the surface's vertices come row by
+    // row as extracted, so most need no division, and those of a row inside
+    // the grid's y and z faces only two comparisons
+    i64 row_first = 0, row_end = 0, j = 0, k = 0;  // its ids [row_first, row_end)
+    bool row_on_a_face = false;
     for (i64 v = begin; v < end; ++v) {
       const i64 e = s.ids[v];
       if (e < 0 || e >= n_edge_ids) continue;  // not a grid edge (a cube's inner vertex)
-      const i64 low = e / 3, axis = e - 3 * low;
-      const i64 yz = by_x.quotient(low), k = by_y.quotient(yz);
-      const i64 c[3] = {low - yz * X, yz - k * Y, k};
-      // most vertices lie inside the grid
-      if (c[0] != 0 && c[0] != X - 1 && c[1] != 0 && c[1] != Y - 1 && c[2] != 0 && c[2] != Z - 1) {
-        continue;
+      if (e < row_first || e >= row_end) {
+        const i64 row = by_x.quotient(e / 3);
+        k = by_y.quotient(row);
+        j = row - k * Y;
+        row_first = 3 * X * row;
+        row_end = row_first + 3 * X;
+        row_on_a_face = j == 0 || j == Y - 1 || k == 0 || k == Z - 1;
       }
+      const i64 in_row = e - row_first;
+      if (!row_on_a_face && in_row >= 3 && in_row < 3 * (X - 1)) continue;  // inside the grid
+      const i64 i = in_row / 3, axis = in_row - 3 * i;
+      const i64 c[3] = {i, j, k};
       for (int f = 0; f < 6; ++f) {
         const Face &F = g.faces[f];
         if (F.axis == axis || c[F.axis] != F.side) continue;
@@ -420,49 +418,83 @@ bool fill(const Grid &g, double level, const Table tables[kGroups], const std::u
     }
   });
 
-  // d) the cap's triangles: each cell task's cells sorted by group, then each
-  //    group's cells with its one table
+  // d) the cap's triangles, cell task by cell task: first the vertex numbers
+  //    of the task's samples and crossings in tables of its own (counted
+  //    along, one rank per column or row of edges), then its cells sorted by
+  //    group and each group's cells written with its one table
   std::atomic<bool> missing{false};
-  std::vector<std::vector<i64>> sorted(static_cast<size_t>(std::max(threads, 1)));
+  struct Scratch {
+    std::vector<i64> order, samples, p_edges, q_edges;
+  };
+  std::vector<Scratch> scratch(static_cast<size_t>(std::max(threads, 1)));
   iso::parallel_for(nc, threads, 1, [&](int worker, i64 t0, i64 t1) {
-    auto &order = sorted[worker];
+    Scratch &w = scratch[worker];
     for (i64 t = t0; t < t1; ++t) {
       const auto &task = g.cell_tasks[t];
       const int fi = task.face;
       const Face &f = g.faces[fi];
       const FaceBits &b = fb[fi];
-      const i64 cq = f.nq - 1, first = task.p0 * cq, n = (task.p1 - task.p0) * cq;
-      const std::uint8_t *group = groups + f.first_cell + first;
+      const i64 nq = f.nq, cq = nq - 1, p0 = task.p0, rows = task.p1 - p0;
+      // samples of rows p0 .. p1 (the positive ones' vertex numbers)
+      w.samples.resize(size_t((rows + 1) * nq));
+      for (i64 q = 0; q < nq; ++q) {
+        i64 *to = w.samples.data() + q;
+        if (fi < 2) {  // (p, q) = (j, k): the first or last sample of its row
+          for (i64 p = p0; p <= task.p1; ++p, to += nq) {
+            const i64 r = p + Y * q;
+            *to = row_start[r] + (f.side == 0 ? 0 : row_counts[r] - 1);
+          }
+          continue;
+        }
+        // column q is row (j, k) of the boundary, p = i along it
+        const i64 r = fi < 4 ? f.side + Y * q : q + Y * f.side;
+        const i64 start = q * 64 * b.words;
+        i64 n = row_start[r] + b.columns.rank(start + p0) - b.columns.rank(start);
+        for (i64 p = p0; p <= task.p1; ++p, to += nq) {
+          *to = n;
+          n += b.columns.test(start + p);
+        }
+      }
+      // crossings of the edges along p of rows p0 .. p1 - 1, and along q of
+      // rows p0 .. p1 (1 + the surface's vertex, 0 where it has none)
+      auto crossings = [&](const Bits &bits, i64 base, i64 first, i64 n, std::vector<i64> &to) {
+        to.resize(size_t(n));
+        i64 slot = base + bits.rank(first);
+        for (i64 e = 0; e < n; ++e) {
+          const bool cut = bits.test(first + e);
+          to[e] = cut ? edge_slot[slot].load(std::memory_order_relaxed) : 0;
+          slot += cut;
+        }
+      };
+      crossings(b.p_edges, b.first_slot, p0 * nq, rows * nq, w.p_edges);
+      crossings(b.q_edges, b.first_slot + b.p_edges.total(), p0 * cq, (rows + 1) * cq,
+                w.q_edges);
+
+      const std::uint8_t *group = groups + f.first_cell + p0 * cq;
+      const i64 n = rows * cq;
       std::array<i64, kGroups + 1> begin{};
       for (int grp = 0; grp < kGroups; ++grp) {
         begin[grp + 1] = begin[grp] + counts[kGroups * t + grp];
       }
       std::array<i64, kGroups> next;
       std::copy(begin.begin(), begin.end() - 1, next.begin());
-      order.resize(size_t(n));
-      for (i64 c = 0; c < n; ++c) order[next[group[c]]++] = first + c;
+      w.order.resize(size_t(n));
+      for (i64 c = 0; c < n; ++c) w.order[next[group[c]]++] = c;
       bool lost = false;
       for (int grp : kOrder) {
         const Table &table = tables[grp];
         if (!table.count) continue;
         i64 *to = out.cells + 3 * at[t][grp];
         for (i64 u = begin[grp]; u < begin[grp + 1]; ++u) {
-          const i64 p = order[u] / cq, q = order[u] - p * cq;
-          // the vertex numbers of the slots the case uses: its positive
-          // corners, and its crossings (-1 where the surface has none)
-          i64 slot[8];
-          for (int c = 0; c < 4; ++c) {
-            if (table.used >> c & 1) {
-              slot[c] = sample_number(fi, p + kCorner[c][0], q + kCorner[c][1]);
-            }
-            if (table.used >> (4 + c) & 1) {
-              const i64 lp = p + kEdgeLow[c][0], lq = q + kEdgeLow[c][1];
-              const i64 e = kAlongQ[c] ? b.first_slot + b.p_edges.total() +
-                                             b.q_edges.rank(lp * (f.nq - 1) + lq)
-                                       : b.first_slot + b.p_edges.rank(lp * f.nq + lq);
-              slot[4 + c] = edge_slot[e].load(std::memory_order_relaxed) - 1;
-            }
-          }
+          const i64 c = w.order[u], p = c / cq, q = c - p * cq;  // p from p0
+          // the vertex numbers of the slots: corners (the case uses its
+          // positive ones), then crossings (-1 where the surface has none)
+          const i64 *sample = w.samples.data() + p * nq + q;
+          const i64 *along_p = w.p_edges.data() + p * nq + q;
+          const i64 *along_q = w.q_edges.data() + p * cq + q;
+          const i64 slot[8] = {sample[0],      sample[nq],         sample[nq + 1],
+                               sample[1],      along_p[0] - 1,     along_q[cq] - 1,
+                               along_p[1] - 1, along_q[0] - 1};
           for (int k = 0; k < table.count; ++k, to += 3) {
             const int *sl = table.slots[k];
             to[0] = slot[sl[f.reverse ? 2 : 0]];
@@ -491,13 +523,11 @@ void bind_cap(nb::module_ &m) {
     for (int c = 0; c < kGroups; ++c) {
       const i64 *row = c < 16 ? tables.data() + 13 * c : joined.data() + 13 * (c - 16);
       t[c].count = int(row[0]);
-      t[c].used = 0;
       if (t[c].count < 0 || t[c].count > 4) throw std::invalid_argument("cap: bad table");
       for (int k = 0; k < 12; ++k) {
         const i64 slot = row[1 + k];
-        if (k < 3 * t[c].count) {
-          if (slot < 0 || slot > 7) throw std::invalid_argument("cap: bad table slot");
-          t[c].used |= 1 << slot;
+        if (k < 3 * t[c].count && (slot < 0 || slot > 7)) {
+          throw std::invalid_argument("cap: bad table slot");
         }
         t[c].slots[k / 3][k % 3] = int(slot);
       }
