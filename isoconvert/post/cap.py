@@ -16,8 +16,11 @@ vertices (found by grid edge id, no welding), lies exactly in the faces, and
 shares its vertices at positive samples between faces that meet at a grid edge:
 the closed surface bounds exactly the part of the object inside the grid.
 
-The tables are derived here; the per-cell work (cases, the decider, looking up
-the surface's vertices by edge id) is the compiled ``grid_cap`` (src/cap.cpp).
+The tables are derived here; the per-cell work (cases, the decider, finding
+the surface's vertices on the faces' edges, numbering the cap's samples) is
+compiled (src/cap.cpp): ``cap_count`` counts, then ``cap_fill`` writes the
+closed mesh into arrays allocated here at their final size, the surface copied
+in once and the cap appended.
 """
 
 from __future__ import annotations
