@@ -322,58 +322,16 @@ bool fill(const Grid &g, double level, const Table tables[kGroups], const std::u
     b.first_slot = n_bipolar;
     n_bipolar += b.p_edges.total() + b.q_edges.total();
   }
-  // 1 + the first vertex of the surface on each bipolar edge (0: none)
+  // 1 + the first vertex of the surface on each bipolar edge (0: none), zeroed
+  // as allocated: a few hundred kB, where a pass of their own would cost the
+  // decoding a wait for it
   std::unique_ptr<std::atomic<i64>[]> edge_slot(
-      new std::atomic<i64>[size_t(std::max<i64>(n_bipolar, 1))]);
-  const i64 n_zero = iso::chunk_count(n_bipolar, kGrain);
-  const i64 n_decode = iso::chunk_count(V, kGrain);
+      new std::atomic<i64>[size_t(std::max<i64>(n_bipolar, 1))]());
 
-  // b) the slots cleared, the cap's samples written, the vertices copied
-  iso::parallel_for(n_zero + nr + n_decode, threads, 1, [&](int, i64 t0, i64 t1) {
-    for (i64 t = t0; t < t1; ++t) {
-      if (t < n_zero) {
-        const i64 end = std::min(n_bipolar, (t + 1) * kGrain);
-        for (i64 e = t * kGrain; e < end; ++e) edge_slot[e].store(0, std::memory_order_relaxed);
-        continue;
-      }
-      if (t < n_zero + nr) {
-        const auto &task = g.row_tasks[t - n_zero];
-        i64 n = row_start[task.r0];
-        auto put = [&](i64 i, i64 j, i64 k) {
-          out.ids[n] = -1 - (i + X * (j + Y * k));
-          double *v = out.vertices + 3 * n;
-          v[0] = double(i) * out.scale[0] + out.shift[0];
-          v[1] = double(j) * out.scale[1] + out.shift[1];
-          v[2] = double(k) * out.scale[2] + out.shift[2];
-          ++n;
-        };
-        for (i64 r = task.r0; r < task.r1; ++r) {
-          const i64 j = r % Y, k = r / Y;
-          if (g.full_row(j, k)) {  // a column of a z face or else of a y face
-            const int f = k == 0 ? 4 : k == Z - 1 ? 5 : j == 0 ? 2 : 3;
-            const FaceBits &b = fb[f];
-            const std::uint64_t *w = b.columns.bits.data() + (f < 4 ? k : j) * b.words;
-            for (i64 u = 0; u < b.words; ++u) {
-              for (std::uint64_t m = w[u]; m; m &= m - 1) put(64 * u + iso::ctz(m), j, k);
-            }
-          } else {  // its first and last samples, in the x faces
-            if (g.faces[0].values[j * Z + k] >= level) put(0, j, k);
-            if (X > 1 && g.faces[1].values[j * Z + k] >= level) put(X - 1, j, k);
-          }
-        }
-        continue;
-      }
-      const i64 begin = (t - n_zero - nr) * kGrain, end = std::min(V, begin + kGrain);
-      std::memcpy(out.vertices + 3 * begin, s.vertices + 3 * begin,
-                  size_t(end - begin) * 3 * sizeof(double));
-      std::memcpy(out.ids + begin, s.ids + begin, size_t(end - begin) * sizeof(i64));
-    }
-  });
-
-  // c) the surface's ids decoded onto the faces' bipolar edges
+  // The surface's ids of vertices [begin, end) decoded onto the faces' bipolar edges.
   const i64 n_edge_ids = 3 * X * Y * Z;
   const Divider by_x(X), by_y(Y);
-  iso::parallel_for(V, threads, kGrain, [&](int, i64 begin, i64 end) {
+  auto decode = [&](i64 begin, i64 end) {
     // the row (j, k) of the last vertex: the surface's vertices come row by
     // row as extracted, so most need no division, and those of a row inside
     // the grid's y and z faces only two comparisons
@@ -416,9 +374,54 @@ bool fill(const Grid &g, double level, const Table tables[kGroups], const std::u
         }
       }
     }
+  };
+
+  // The cap's samples of a run of boundary rows: ids and positions.
+  auto write_samples = [&](const Grid::RowTask &task) {
+    i64 n = row_start[task.r0];
+    auto put = [&](i64 i, i64 j, i64 k) {
+      out.ids[n] = -1 - (i + X * (j + Y * k));
+      double *v = out.vertices + 3 * n;
+      v[0] = double(i) * out.scale[0] + out.shift[0];
+      v[1] = double(j) * out.scale[1] + out.shift[1];
+      v[2] = double(k) * out.scale[2] + out.shift[2];
+      ++n;
+    };
+    for (i64 r = task.r0; r < task.r1; ++r) {
+      const i64 j = r % Y, k = r / Y;
+      if (g.full_row(j, k)) {  // a column of a z face or else of a y face
+        const int f = k == 0 ? 4 : k == Z - 1 ? 5 : j == 0 ? 2 : 3;
+        const FaceBits &b = fb[f];
+        const std::uint64_t *w = b.columns.bits.data() + (f < 4 ? k : j) * b.words;
+        for (i64 u = 0; u < b.words; ++u) {
+          for (std::uint64_t m = w[u]; m; m &= m - 1) put(64 * u + iso::ctz(m), j, k);
+        }
+      } else {  // its first and last samples, in the x faces
+        if (g.faces[0].values[j * Z + k] >= level) put(0, j, k);
+        if (X > 1 && g.faces[1].values[j * Z + k] >= level) put(X - 1, j, k);
+      }
+    }
+  };
+
+  // b) the ids decoded, the cap's samples written, the vertices copied (last:
+  //    chunks of plain copying even out the threads' shares)
+  const i64 n_chunks = iso::chunk_count(V, kGrain);
+  iso::parallel_for(n_chunks + nr + n_chunks, threads, 1, [&](int, i64 t0, i64 t1) {
+    for (i64 t = t0; t < t1; ++t) {
+      if (t < n_chunks) {
+        decode(t * kGrain, std::min(V, (t + 1) * kGrain));
+      } else if (t < n_chunks + nr) {
+        write_samples(g.row_tasks[t - n_chunks]);
+      } else {
+        const i64 begin = (t - n_chunks - nr) * kGrain, end = std::min(V, begin + kGrain);
+        std::memcpy(out.vertices + 3 * begin, s.vertices + 3 * begin,
+                    size_t(end - begin) * 3 * sizeof(double));
+        std::memcpy(out.ids + begin, s.ids + begin, size_t(end - begin) * sizeof(i64));
+      }
+    }
   });
 
-  // d) the cap's triangles, cell task by cell task: first the vertex numbers
+  // c) the cap's triangles, cell task by cell task: first the vertex numbers
   //    of the task's samples and crossings in tables of its own (counted
   //    along, one rank per column or row of edges), then its cells sorted by
   //    group and each group's cells written with its one table
