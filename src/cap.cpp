@@ -251,10 +251,10 @@ struct Bits {
 
 struct FaceBits {
   i64 words = 0;  // per column
-  Bits columns;   // bit w * 64 + p of column q at q * 64 * words + p (y and z faces)
+  Bits columns;   // positive samples, column q's bit p at q * 64 * words + p (y and z faces)
   // bipolar edges: along p from (p, q), bit p nq + q; along q from (p, q), bit p (nq - 1) + q
   Bits p_edges, q_edges;
-  i64 first_slot = 0;     // its bipolar edges' place among all faces' (along p, then along q)
+  i64 first_slot = 0;  // its bipolar edges' place among all faces' (along p, then along q)
 };
 
 // 2. The closed mesh: the surface copied in, then the cap. Returns whether a
