@@ -1,6 +1,7 @@
 """Post-processing and attributes against VTK: smoothing, decimation, normals, closing.
 
-Run ``python bench/bench_post.py`` (``--rounds N``, ``--size N``). One surface: the
+Run ``python bench/bench_post.py`` (``--rounds N``, ``--size N``, ``--only close`` for
+one pair; the load average is printed before and after). One surface: the
 gyroid ``sin x cos y + sin y cos z + sin z cos x`` at level 0.1 on an N^3 float32 grid
 (two periods, N = 256 by default: 1.26 million triangles), extracted once by isoconvert
 (VTK's Flying Edges gives the same vertices and triangles). Each pair below runs in
@@ -24,6 +25,7 @@ ratio (isoconvert / VTK) are printed:
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -103,14 +105,17 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--size", type=int, default=256)
+    parser.add_argument(
+        "--only",
+        choices=["smooth", "decimate", "normals", "close"],
+        action="append",
+        help="run only these pairs (repeatable); all by default",
+    )
     args = parser.parse_args(argv)
+    chosen = set(args.only or ["smooth", "decimate", "normals", "close"])
 
     from vtkmodules.vtkCommonCore import vtkSMPTools
-    from vtkmodules.vtkFiltersCore import (
-        vtkFlyingEdges3D,
-        vtkQuadricDecimation,
-        vtkWindowedSincPolyDataFilter,
-    )
+    from vtkmodules.vtkFiltersCore import vtkFlyingEdges3D, vtkWindowedSincPolyDataFilter
 
     from isoconvert import extract, vertex_normals
     from isoconvert.post.cap import close_at_grid
@@ -127,7 +132,8 @@ def main(argv: list[str] | None = None) -> None:
     image = vtk_image(zyx)
     print(
         f"gyroid {args.size}^3 at 0.1: {mesh.n_vertices:,} vertices, {mesh.n_cells:,} "
-        f"triangles; seconds best, median; {args.rounds} rounds; {kernel_threads()} threads"
+        f"triangles; seconds best, median; {args.rounds} rounds; {kernel_threads()} threads; "
+        f"load average {load_average()}"
     )
 
     def vtk_sinc():
@@ -140,25 +146,12 @@ def main(argv: list[str] | None = None) -> None:
             f.SetWindowFunctionToNuttall()
         f.Update()
 
-    t = interleaved({"ours": lambda: smooth(mesh, 50, "sinc"), "vtk": vtk_sinc}, args.rounds)
-    report("smooth, sinc, 50 iterations", t["ours"], t["vtk"], "VTK")
+    if "smooth" in chosen:
+        t = interleaved({"ours": lambda: smooth(mesh, 50, "sinc"), "vtk": vtk_sinc}, args.rounds)
+        report("smooth, sinc, 50 iterations", t["ours"], t["vtk"], "VTK")
 
-    try:
-        from isoconvert.post.decimate import decimate
-
-        decimate(mesh, 0.9)
-    except Exception as exc:  # the simplify extra is missing
-        print(f"decimate: skipped ({exc})")
-    else:
-
-        def vtk_decimate():
-            f = vtkQuadricDecimation()
-            f.SetInputData(polydata)
-            f.SetTargetReduction(0.9)
-            f.Update()
-
-        t = interleaved({"ours": lambda: decimate(mesh, 0.9), "vtk": vtk_decimate}, args.rounds)
-        report("decimate 90%", t["ours"], t["vtk"], "VTK")
+    if "decimate" in chosen:
+        run_decimate(mesh, polydata, args.rounds)
 
     def vtk_contour(normals: bool):
         f = vtkFlyingEdges3D()
@@ -167,28 +160,61 @@ def main(argv: list[str] | None = None) -> None:
         f.SetComputeNormals(normals)
         f.Update()
 
-    t = interleaved(
-        {
-            "ours": lambda: extract(volume, 0.1, normals=True),
-            "ours second pass": lambda: vertex_normals(extract(volume, 0.1), volume),
-            "ours plain": lambda: extract(volume, 0.1),
-            "vtk": lambda: vtk_contour(True),
-            "vtk plain": lambda: vtk_contour(False),
-        },
-        args.rounds,
-    )
-    ours = [a - b for a, b in zip(t["ours"], t["ours plain"], strict=True)]
-    theirs = [a - b for a, b in zip(t["vtk"], t["vtk plain"], strict=True)]
-    report("normals (with minus without)", ours, [max(x, 1e-6) for x in theirs], "VTK")
-    second = [a - b for a, b in zip(t["ours second pass"], t["ours plain"], strict=True)]
-    report("normals, second pass instead", second, [max(x, 1e-6) for x in theirs], "VTK")
+    if "normals" in chosen:
+        t = interleaved(
+            {
+                "ours": lambda: extract(volume, 0.1, normals=True),
+                "ours second pass": lambda: vertex_normals(extract(volume, 0.1), volume),
+                "ours plain": lambda: extract(volume, 0.1),
+                "vtk": lambda: vtk_contour(True),
+                "vtk plain": lambda: vtk_contour(False),
+            },
+            args.rounds,
+        )
+        ours = [a - b for a, b in zip(t["ours"], t["ours plain"], strict=True)]
+        theirs = [a - b for a, b in zip(t["vtk"], t["vtk plain"], strict=True)]
+        report("normals (with minus without)", ours, [max(x, 1e-6) for x in theirs], "VTK")
+        second = [a - b for a, b in zip(t["ours second pass"], t["ours plain"], strict=True)]
+        report("normals, second pass instead", second, [max(x, 1e-6) for x in theirs], "VTK")
 
-    pairs = {
-        "close": lambda: close_at_grid(mesh, volume, 0.1),
-        "extract": lambda: extract(volume, 0.1),
-    }
-    t = interleaved(pairs, args.rounds)
-    report("close at the grid's faces", t["close"], t["extract"], "extract")
+    if "close" in chosen:
+        pairs = {
+            "close": lambda: close_at_grid(mesh, volume, 0.1),
+            "extract": lambda: extract(volume, 0.1),
+        }
+        t = interleaved(pairs, args.rounds)
+        report("close at the grid's faces", t["close"], t["extract"], "extract")
+    print(f"load average {load_average()}")
+
+
+def run_decimate(mesh, polydata, rounds: int) -> None:
+    """isoconvert's decimation against vtkQuadricDecimation, when the simplify extra is there."""
+    from vtkmodules.vtkFiltersCore import vtkQuadricDecimation
+
+    try:
+        from isoconvert.post.decimate import decimate
+
+        decimate(mesh, 0.9)
+    except Exception as exc:  # the simplify extra is missing
+        print(f"decimate: skipped ({exc})")
+        return
+
+    def vtk_decimate():
+        f = vtkQuadricDecimation()
+        f.SetInputData(polydata)
+        f.SetTargetReduction(0.9)
+        f.Update()
+
+    t = interleaved({"ours": lambda: decimate(mesh, 0.9), "vtk": vtk_decimate}, rounds)
+    report("decimate 90%", t["ours"], t["vtk"], "VTK")
+
+
+def load_average() -> str:
+    """The 1, 5 and 15 minute load averages (other work on the machine skews timings)."""
+    try:
+        return " ".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:  # not on this system
+        return "unknown"
 
 
 if __name__ == "__main__":

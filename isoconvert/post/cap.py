@@ -16,11 +16,16 @@ vertices (found by grid edge id, no welding), lies exactly in the faces, and
 shares its vertices at positive samples between faces that meet at a grid edge:
 the closed surface bounds exactly the part of the object inside the grid.
 
-The tables are derived here; the per-cell work (cases, the decider, looking up
-the surface's vertices by edge id) is the compiled ``grid_cap`` (src/cap.cpp).
+The tables are derived here; the per-cell work (cases, the decider, finding
+the surface's vertices on the faces' edges, numbering the cap's samples) is
+compiled (src/cap.cpp): ``cap_count`` counts, then ``cap_fill`` writes the
+closed mesh into arrays allocated here at their final size, the surface copied
+in once and the cap appended.
 """
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 
@@ -156,51 +161,87 @@ def close_at_grid(
     shape = np.asarray(volume.shape, dtype=np.int64)
     outward_flip = reversed_orientation(volume, flip)
     decided = ambiguity == TRILINEAR  # each ambiguous cell by its own decider
-    fixed = DEFAULT_AMBIGUITY if decided else ambiguity
-    tables = np.array([_table_row(_cell_triangles(case, fixed)) for case in range(16)])
-    joined = np.array([_table_row(_cell_triangles(case, "separate-negative")) for case in (5, 10)])
-    faces, images, start = [], [], 0
-    for axis, side, image in _face_images(volume):
+    tables, joined = _tables(DEFAULT_AMBIGUITY if decided else ambiguity)
+    # the six face images, x0, x1, y0, y1, z0, z1, one after the other in float64
+    values = np.empty(sum(_face_sizes(volume.shape)), dtype=np.float64)
+    reverse = np.empty(6, dtype=np.int64)
+    start = 0
+    for f, (axis, side, image) in enumerate(_face_images(volume)):
         p_axis, q_axis = [a for a in range(3) if a != axis]
-        values = np.asarray(image, dtype=np.float64).ravel()
-        if nan_as is not None:
-            values = np.where(np.isfinite(values), values, nan_as)
+        n = image.shape[0] * image.shape[1]
+        values[start : start + n].reshape(image.shape)[...] = image
+        start += n
         # the cap's normals point out of the grid: -axis on side 0, +axis on the far side
         p_cross_q = 1 if (p_axis, q_axis) in ((1, 2), (0, 1)) else -1
-        reverse = (p_cross_q * (1 if side else -1) < 0) != outward_flip
-        faces.append([axis, side, image.shape[0], image.shape[1], int(reverse), start])
-        images.append(values)
-        start += len(values)
-    cap, samples, missing = _native.grid_cap(
-        np.concatenate(images),
-        np.array(faces, dtype=np.int64),
+        reverse[f] = (p_cross_q * (1 if side else -1) < 0) != outward_flip
+    if nan_as is not None:
+        np.copyto(values, nan_as, where=~np.isfinite(values))
+    threads = kernel_threads()
+    groups, counts, rows, n_triangles, n_samples = _native.cap_count(
+        values, reverse, shape, float(level), tables, joined, decided, threads
+    )
+    if not n_triangles:
+        return mesh
+    n_vertices, n_cells = mesh.n_vertices, mesh.n_cells
+    # the closed mesh's arrays, allocated once: the surface goes in first, then the cap
+    vertices = np.empty((n_vertices + n_samples, 3), dtype=np.float64)
+    cells = np.empty((n_cells + n_triangles, 3), dtype=np.int64)
+    edge_ids = np.empty(n_vertices + n_samples, dtype=np.int64)
+    # the cap's samples are placed by the kernel where the grid's axes are the
+    # world's (index * spacing + origin, as Volume.index_to_world computes it),
+    # else left as indices and placed here
+    axis_aligned = np.array_equal(volume.direction, np.eye(3))
+    scale = np.asarray(volume.spacing if axis_aligned else np.ones(3), dtype=np.float64)
+    shift = np.asarray(volume.origin if axis_aligned else np.zeros(3), dtype=np.float64)
+    missing = _native.cap_fill(
+        values,
+        reverse,
         shape,
         float(level),
         tables,
         joined,
-        decided,
+        groups,
+        counts,
+        rows,
+        np.ascontiguousarray(mesh.vertices, dtype=np.float64),
+        np.ascontiguousarray(mesh.cells, dtype=np.int64),
         np.ascontiguousarray(mesh.edge_ids, dtype=np.int64),
-        kernel_threads(),
+        scale,
+        shift,
+        vertices,
+        cells,
+        edge_ids,
+        threads,
     )
     if missing:
         raise IsoconvertError(
             "--close: the surface does not cross the grid's faces where the volume says it "
             "should; it must be the cubes surface of this volume at this level"
         )
-    if not len(cap):
-        return mesh
-    i = samples % shape[0]
-    j = samples // shape[0] % shape[1]
-    k = samples // (shape[0] * shape[1])
-    vertices = volume.index_to_world(np.column_stack([i, j, k]).astype(np.float64))
+    if not axis_aligned:
+        volume.index_to_world(vertices[n_vertices:])
     info = dict(mesh.info)
-    info["closed"] = {"cap_triangles": len(cap), "cap_vertices": len(vertices)}
-    return Mesh(
-        np.concatenate([np.asarray(mesh.vertices), vertices]),
-        np.concatenate([np.asarray(mesh.cells), cap]),
-        np.concatenate([np.asarray(mesh.edge_ids), -1 - samples]),
-        info,
-    )
+    info["closed"] = {"cap_triangles": n_triangles, "cap_vertices": n_samples}
+    return Mesh(vertices, cells, edge_ids, info)
+
+
+def _face_sizes(shape: tuple[int, ...]) -> list[int]:
+    """The number of samples of each face image, in ``_face_images`` order."""
+    sizes = []
+    for axis in range(3):
+        p_axis, q_axis = [a for a in range(3) if a != axis]
+        sizes += [shape[p_axis] * shape[q_axis]] * 2
+    return sizes
+
+
+@functools.cache
+def _tables(rule: str) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's tables: the 16 cases under ``rule``, and the ambiguous cases
+    5 and 10 joined (the decider's other answer)."""
+    tables = np.array([_table_row(_cell_triangles(case, rule)) for case in range(16)])
+    joined = np.array([_table_row(_cell_triangles(case, "separate-negative")) for case in (5, 10)])
+    tables.flags.writeable = joined.flags.writeable = False
+    return tables, joined
 
 
 def _table_row(triangles: list[tuple[int, int, int]]) -> list[int]:
