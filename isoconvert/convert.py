@@ -326,7 +326,7 @@ def _convert_levels_to_layer(
     writer = WRITERS.get(opts.format)
     if opts.normals or opts.values is not None or opts.with_volume:
         flag = "--normals" if opts.normals else "--values" if opts.values else "--with-volume"
-        why = "the labels' voxels" if opts.with_volume else "vertex attributes"
+        why = "label voxels" if opts.with_volume else "vertex attributes"
         raise FormatError(
             f"{flag}: a precomputed layer of isosurfaces holds no {why}; leave it out"
         )

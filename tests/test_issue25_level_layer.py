@@ -73,7 +73,7 @@ def _isoconvert(*args, cwd):
     ("extra", "message"),
     [
         (["--normals"], "--normals: a precomputed layer of isosurfaces holds no vertex"),
-        (["--with-volume"], "holds no the labels' voxels"),
+        (["--with-volume"], "holds no label voxels"),
         (["--level", "60.5"], "a level is given twice"),
         (["--legacy-mesh", "--lods", "2"], "one level of detail"),
     ],
