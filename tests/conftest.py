@@ -84,6 +84,15 @@ def ball(n: int, radius: float, center=None) -> np.ndarray:
     return radius - np.sqrt((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2)
 
 
+def angles_degrees(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle between rows of ``a (N, 3)`` and ``b (N, 3)``, in degrees, in float64
+    (atan2 of the cross and dot products stays accurate near 0, unlike arccos)."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    cross = np.linalg.norm(np.cross(a, b), axis=1)
+    return np.degrees(np.arctan2(cross, np.einsum("ij,ij->i", a, b)))
+
+
 def edge_key(vertices: np.ndarray, spacing=None) -> tuple[np.ndarray, np.ndarray]:
     """Sort vertices lying strictly inside grid edges by (edge, position).
 

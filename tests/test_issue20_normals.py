@@ -19,7 +19,7 @@ import meshio
 import nrrd
 import numpy as np
 import pytest
-from conftest import dataset
+from conftest import angles_degrees, dataset
 
 from isoconvert import extract, read_volume, vertex_normals, vertex_values
 from isoconvert.convert import convert
@@ -32,15 +32,6 @@ def in_memory(volume: Volume) -> Volume:
     copy = dataclasses.replace(volume, data=np.asarray(volume.data))
     assert copy.grid is None
     return copy
-
-
-def angles_degrees(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angle between rows of ``a (N, 3)`` and ``b (N, 3)``, in degrees, in float64
-    (atan2 of the cross and dot products stays accurate near 0, unlike arccos)."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    cross = np.linalg.norm(np.cross(a, b), axis=1)
-    return np.degrees(np.arctan2(cross, np.einsum("ij,ij->i", a, b)))
 
 
 def test_flair_file_backed_normals_equal_the_in_memory_ones():

@@ -20,7 +20,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import dataset
+from conftest import angles_degrees, dataset
 
 from isoconvert import _native, extract, read_volume, vertex_normals
 from isoconvert.arrays import marching_cubes as array_marching_cubes
@@ -32,15 +32,6 @@ from isoconvert.volume import Volume
 
 #: The issue's bound on the angle between the two paths' normals.
 TOLERANCE_DEGREES = 1e-6
-
-
-def angles_degrees(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angle between rows of ``a (N, 3)`` and ``b (N, 3)`` in degrees, in float64
-    (atan2 of the cross and dot products stays accurate near 0, unlike arccos)."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    cross = np.linalg.norm(np.cross(a, b), axis=1)
-    return np.degrees(np.arctan2(cross, np.einsum("ij,ij->i", a, b)))
 
 
 def rotation(ax: float, ay: float, az: float) -> np.ndarray:
