@@ -184,18 +184,28 @@ def test_the_report_gives_the_certified_bound_and_trimesh_agrees(tmp_path):
     import json
     import re
 
+    import jsonschema
+
     from isoconvert.cli import main
     from isoconvert.meshfile import read_mesh
+    from isoconvert.report import SCHEMA_PATH
 
     src = dataset("fuel_64x64x64_uint8.raw")
     out, report = tmp_path / "f.ply", tmp_path / "r.json"
     code = main(["convert", str(src), "-l", "80.5", "-o", str(out), "--max-error", "0.7"] + [
         "--report", str(report)])  # fmt: skip
     assert code == 0
-    lines = json.loads(report.read_text())["post_processing"]["changed"]
+    data = json.loads(report.read_text())
+    jsonschema.validate(data, json.loads(SCHEMA_PATH.read_text()))
+    lines = data["post_processing"]["changed"]
     [line] = [x for x in lines if x.startswith("decimation:")]
     certified = [float(x) for x in re.findall(r"\d+(?:\.\d+)?(?:e-?\d+)?", line)][-2:]
     assert len(certified) == 2 and max(certified) <= 0.7
+    # the same numbers, structured
+    bound = data["post_processing"]["decimation"]
+    assert bound["max_error"] == 0.7 and bound["unit"] is None
+    as_text = [float(f"{bound[k]:.7g}") for k in ("input_to_result", "result_to_input")]
+    assert as_text == certified
     mesh = extract(read_volume(src), 80.5)
     measured = two_sided_distances(mesh, read_mesh(out), n=20_000)
     assert max(measured) <= 0.7 + 1e-6  # the file stores float32

@@ -21,9 +21,9 @@ def _report_result(result, target, required, examples, force, quiet) -> list[str
 
     grid = result.mesh.info.get("grid")
     checked = check_mesh(result.written, examples=examples, source=str(result.output), grid=grid)
-    changed = None
+    changed = bound = None
     if result.extracted is not None and not (quiet and target in (None, "-")):
-        from ..post.pipeline import bound_lines, changes
+        from ..post.pipeline import bound_lines, certified_bound, changes
         from ..writers.stored import stored_mesh
 
         # both as the file stores them (STL: three vertices per triangle)
@@ -31,25 +31,28 @@ def _report_result(result, target, required, examples, force, quiet) -> list[str
         before = check_mesh(extracted, examples=0, grid=grid).to_dict()
         changed = changes(before, checked.to_dict()) or ["nothing the report measures"]
         changed += bound_lines(result.mesh.info)
+        bound = certified_bound(result.mesh.info)
         if not quiet:
             print(f"{result.output}: post-processing changed:", file=sys.stderr)
             for line in changed:
                 print(f"  {line}", file=sys.stderr)
     try:
         _emit_report(
-            checked, target, required, as_json=False, force=force, quiet=quiet, changed=changed
-        )
+            checked, target, required, as_json=False, force=force, quiet=quiet, changed=changed,
+            bound=bound,
+        )  # fmt: skip
     except typer.Exit:
         return checked.failures(required)
     return []
 
 
 def _emit_report(
-    checked, target, required, *, as_json, force, quiet, changed=None, inputs=()
+    checked, target, required, *, as_json, force, quiet, changed=None, inputs=(), bound=None
 ) -> None:
     """Print the report (target "-") or write it to a file (JSON when its name ends in
     .json, else the printed table), with what post-processing ``changed`` (lines) in
-    the file; exit 4 when a required check fails."""
+    the file, and in JSON the decimation's certified ``bound`` as numbers; exit 4 when
+    a required check fails."""
     from ..report import format_report
 
     if target is not None and target != "-":
@@ -59,6 +62,8 @@ def _emit_report(
             data = checked.to_dict()
             if changed is not None:
                 data["post_processing"] = {"changed": list(changed)}
+                if bound is not None:
+                    data["post_processing"]["decimation"] = bound
             text = json.dumps(data, indent=2)
         else:
             text = format_report(checked)

@@ -308,21 +308,38 @@ def changes(before: dict, after: dict) -> list[str]:
     return lines
 
 
-def bound_lines(info: dict) -> list[str]:
-    """Lines giving the distance bound a decimation with ``max_error`` certified,
-    from a post-processed mesh's ``info`` (none without one). The bound is
-    between decimation's input and output: after the steps before it (closing,
-    clean-up, smoothing), not the extracted surface."""
+def certified_bound(info: dict) -> dict | None:
+    """The distance bound a decimation with ``max_error`` certified, from a
+    post-processed mesh's ``info``: ``{"max_error", "input_to_result",
+    "result_to_input", "unit"}`` (the report's ``post_processing.decimation``), or
+    None without one. The bound is between decimation's input and output: after the
+    steps before it (closing, clean-up, smoothing), not the extracted surface."""
     record = info.get("decimation") or {}
-    bound = record.get("max_error")
-    there, back = record.get("input_to_result"), record.get("result_to_input")
-    if bound is None or there is None or back is None:
+    names = ("max_error", "input_to_result", "result_to_input")
+    if any(record.get(name) is None for name in names):
+        return None
+    return {**{name: float(record[name]) for name in names}, "unit": info.get("unit")}
+
+
+def bound_lines(info: dict) -> list[str]:
+    """:func:`certified_bound` as lines of the report (none without one)."""
+    bound = certified_bound(info)
+    if bound is None:
         return []
-    unit = f" {info['unit']}" if info.get("unit") else ""
+    unit = f" {bound['unit']}" if bound["unit"] else ""
+    there, back = bound["input_to_result"], bound["result_to_input"]
     return [
-        f"decimation: its input and its result within {bound:g}{unit} of each other, both "
-        f"ways (certified: input to result at most {there:.7g}, result to input {back:.7g})"
+        f"decimation: its input and its result within {bound['max_error']:g}{unit} of each "
+        f"other, both ways (certified: input to result at most {there:.7g}, result to input "
+        f"{back:.7g})"
     ]
 
 
-__all__ = ["EmptyMeshError", "PostOptions", "bound_lines", "changes", "post_process"]
+__all__ = [
+    "EmptyMeshError",
+    "PostOptions",
+    "bound_lines",
+    "certified_bound",
+    "changes",
+    "post_process",
+]
