@@ -129,6 +129,14 @@ def test_labels_a_segmentation_cannot_hold_are_errors(tmp_path):
         _write(tmp_path / "b", zero, surfaces, data_type="uint32", volume=zero, background=3)
     with pytest.raises(IsoconvertError, match="uint32 or uint64"):
         _write(tmp_path / "c", zero, surfaces, data_type="uint16", volume=zero, background=3)
+    # a negative background is stored as 0, but another negative label cannot be stored
+    shifted = _labels().astype(np.int32)
+    shifted[shifted == 0] = -3
+    shifted[shifted == 5] = -1
+    below = Volume.from_zyx(shifted, spacing=(1.0, 1.0, 1.0))
+    surfaces = label_surfaces(below, labels=[2, 9], background=-3, smoothing=0)
+    with pytest.raises(IsoconvertError, match="label -1 is negative"):
+        _write(tmp_path / "d", below, surfaces, data_type="uint32", volume=below, background=-3)
     assert not any(tmp_path.iterdir())
 
 

@@ -95,11 +95,6 @@ def write_chunks(folder: Path, volume: Volume, background: int, data_type: str) 
 
 def _labels(zyx: np.ndarray, background: int, dtype: np.dtype, source: str) -> np.ndarray:
     """A slab's samples as stored labels: background as 0, in ``dtype``."""
-    if zyx.size and zyx.min() < 0 and not (background < 0 and zyx.min() == background):
-        raise IsoconvertError(
-            f"{source}: label {zyx.min()} is negative; a precomputed segmentation holds "
-            "labels 0 and up: leave out --with-volume, or shift the labels"
-        )
     if background != 0:
         if (zyx == 0).any():
             raise IsoconvertError(
@@ -107,6 +102,11 @@ def _labels(zyx: np.ndarray, background: int, dtype: np.dtype, source: str) -> n
                 f"--background {background}: leave out --with-volume, or relabel 0"
             )
         zyx = np.where(zyx == background, 0, zyx)
+    if zyx.size and zyx.min() < 0:
+        raise IsoconvertError(
+            f"{source}: label {zyx.min()} is negative; a precomputed segmentation holds "
+            "labels 0 and up: leave out --with-volume, or shift the labels"
+        )
     return np.ascontiguousarray(zyx).astype(dtype, copy=False)
 
 
