@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import VolumeError
-from .extract.cubes import SLACK, gradient_maps
+from .extract.cubes import SLACK, gradient_maps, triangle_normals_where_flat
 from .extract.prepare import kernel_type
 from .grid import grid_slab_zyx
 from .memory import row_chunks
@@ -162,10 +162,7 @@ def vertex_normals(
     if not mesh.is_triangles:
         raise VolumeError("normals need a triangle mesh; contours (squares) have none")
     normals = _sample(volume, mesh.vertices, True, nan_as, sign=1.0 if flip else -1.0)
-    flat = ~normals.any(axis=1)
-    flat |= np.isnan(normals[:, 0])
-    if flat.any():
-        normals[flat] = mesh.vertex_normals()[flat]
+    triangle_normals_where_flat(normals, mesh)
     return normals
 
 

@@ -221,11 +221,26 @@ def fill_pass_normals(
         )
         normals[inner] = sampled
         flat += int(np.count_nonzero(~sampled.any(axis=1) | np.isnan(sampled[:, 0])))
-    if flat:  # as vertex_normals: the triangles' normals where the gradient fails
-        where = ~normals.any(axis=1)
-        where |= np.isnan(normals[:, 0])
-        normals[where] = mesh.vertex_normals()[where]
+    if flat:
+        triangle_normals_where_flat(normals, mesh)
     return normals
+
+
+def triangle_normals_where_flat(normals: np.ndarray, mesh: Mesh) -> None:
+    """Where a gradient normal is 0 (a flat neighbourhood) or NaN, put the
+    area-weighted normal of the vertex's triangles instead, in place: the one
+    fallback of both the filling pass and :func:`isoconvert.vertex_normals`.
+
+    Parameters
+    ----------
+    normals : (V, 3) float32
+    mesh : Mesh
+        Its triangles.
+    """
+    flat = ~normals.any(axis=1)
+    flat |= np.isnan(normals[:, 0])
+    if flat.any():
+        normals[flat] = mesh.vertex_normals()[flat]
 
 
 @dataclass(frozen=True)
