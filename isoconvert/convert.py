@@ -280,6 +280,7 @@ def convert_levels(
     """
     opts = (options or ConvertOptions()).updated(**changes)
     progress = on_progress or (lambda stage: None)
+    refuse_layer_options(opts, WRITERS.get(opts.format) if opts.format else None)
     if opts.format and WRITERS.get(opts.format).layer:
         return _convert_levels_to_layer(
             input, output, levels, opts, on_status, progress, also_writes
@@ -370,6 +371,14 @@ def _convert_levels_to_layer(
         )
         for n in meshes
     ]
+
+
+def refuse_layer_options(opts: ConvertOptions, writer: Writer | None) -> None:
+    """Refuse the flags only a precomputed layer takes when ``writer`` writes none
+    (None: the format comes from the output's name, which is no layer's)."""
+    if (opts.with_volume or opts.legacy_mesh) and not (writer and writer.layer):
+        flag = "--with-volume" if opts.with_volume else "--legacy-mesh"
+        raise IsoconvertError(f"{flag} is an option of --format precomputed")
 
 
 def bounded_collapse(mesh: Mesh, bound: float) -> Mesh:

@@ -14,6 +14,7 @@ from .convert import (
     ConvertResult,
     bounded_collapse,
     read_input,
+    refuse_layer_options,
     refuse_outputs_read,
 )
 from .errors import IsoconvertError
@@ -85,9 +86,7 @@ def convert_labels(
             "neither: leave them out with --labels"
         )
     post = replace(opts.post, close=False, smooth=0)  # label surfaces are closed and smoothed
-    if (opts.with_volume or opts.legacy_mesh) and not writer.layer:
-        flag = "--with-volume" if opts.with_volume else "--legacy-mesh"
-        raise IsoconvertError(f"{flag} is an option of --format precomputed")
+    refuse_layer_options(opts, writer)
     if writer.layer:
         if opts.single_file:
             raise IsoconvertError(

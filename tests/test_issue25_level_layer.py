@@ -95,3 +95,12 @@ def test_the_command_writes_a_legacy_level_layer(tmp_path):
     back = _cloud(tmp_path / "layer ñ").mesh.get(1)
     back = back[1] if isinstance(back, dict) else back
     assert trimesh.Trimesh(back.vertices, back.faces).is_watertight
+
+
+@pytest.mark.parametrize("flag", ["--with-volume", "--legacy-mesh"])
+def test_layer_flags_without_a_layer_are_one_line_errors(tmp_path, flag):
+    _nested_balls(tmp_path / "field.npy")
+    done = _isoconvert("convert", "field.npy", "--level", "60.5", flag, "-o", "f.ply", cwd=tmp_path)
+    assert done.returncode != 0 and "Traceback" not in done.stderr
+    assert f"{flag} is an option of --format precomputed" in done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["field.npy"]
