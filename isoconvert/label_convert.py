@@ -121,6 +121,7 @@ def convert_labels(
         background=opts.background,
         smoothing=opts.label_smoothing,
         on_status=on_status,
+        blocks=opts.blocks,
     )
     if opts.single_file:
         mesh = surfaces.combined

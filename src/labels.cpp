@@ -440,6 +440,13 @@ struct NetOptions {
   double relaxation, constraint;
   bool reverse;
   int threads;
+  // A z-slab of a larger volume (isoconvert/extract/label_blocks.py): its first
+  // layer is the volume's layer z_offset, so positions are the volume's own (the
+  // same bits as the whole volume's run wherever the slab reaches far enough),
+  // and the counts (split, unresolved, outside) are of the dual cells of layers
+  // count_lo <= z < count_hi only (slab-local; count_hi < 0: every layer).
+  i64 z_offset = 0;
+  i64 count_lo = 0, count_hi = -1;
 };
 
 // How far split copies start from their dual cell's centre, as a fraction of
@@ -453,6 +460,7 @@ constexpr double kSplitStep = 1.0 / 64.0;
 struct NetResult {
   Vec<double> positions;  // (V, 3)
   Vec<i64> dual_cells;    // (V,)
+  Vec<u8> sheets;         // (V,): which sheet of its dual cell (numbered by first face)
   Vec<i64> corners;       // (Q, 4)
   Vec<i64> pairs;         // (2Q, 2): inside, outside of each triangle
   Vec<i32> sides;         // (Q, 2): wanted-label index of inside, outside (-1)
@@ -525,10 +533,9 @@ class Net {
         nv += c.nsheets;
         for (int s = 0; s < c.nsheets; ++s) ne += (c.nbcount >> (4 * s)) & 15;
         if (c.nsheets > 1) split_cells.push_back(&c);
-        out.unresolved += c.pinched;
-        out.outside += c.pinched_out;
       }
     }
+    count_cells(out);
     unsplit_rings(out);
     const i64 nq = quad_offsets();
     Vec<i64> corners(static_cast<size_t>(4 * nq));
@@ -536,19 +543,22 @@ class Net {
     out.pairs.resize(size_t(4 * nq));
     out.sides.resize(size_t(2 * nq));
     Vec<i64> cell_of(static_cast<size_t>(nv));
+    Vec<u8> sheet_of(static_cast<size_t>(nv));
     Vec<u8> junction(static_cast<size_t>(nv));
     Vec<i64> nb(static_cast<size_t>(ne));
     Vec<i64> nboff(static_cast<size_t>(nv + 1));
     iso::parallel_for(i64(chunks_.size()), o_.threads, 1, [&](int, i64 b, i64 e) {
       for (i64 c = b; c < e; ++c) {
         fill(chunks_[size_t(c)], corners.data(), flip.data(), out.pairs.data(), out.sides.data(),
-             cell_of.data(), junction.data(), nb.data(), nboff.data());
+             cell_of.data(), sheet_of.data(), junction.data(), nb.data(), nboff.data());
       }
     });
     nboff[size_t(nv)] = ne;
     Vec<double> pos = smooth(cell_of, junction, nb, nboff, split_cells);
     // copies that still coincide (none seen in tests): the note counts them
+    const i64 layer = (X_ + 1) * (Y_ + 1);
     for (const Cell *c : split_cells) {
+      if (!counted(cell_of[size_t(c->first)] / layer)) continue;
       for (int s = 1; s < c->nsheets; ++s) {
         for (int t = 0; t < s; ++t) {
           const double *a = &pos[size_t(3 * (c->first + s))], *b = &pos[size_t(3 * (c->first + t))];
@@ -576,16 +586,15 @@ class Net {
     out.corners = std::move(corners);
     out.positions.resize(size_t(3 * nv));
     out.dual_cells.resize(size_t(nv));
+    out.sheets.resize(size_t(nv));
     iso::parallel_for(nv, o_.threads, 1 << 16, [&](int, i64 b, i64 e) {
       for (i64 p = b; p < e; ++p) {
         const i64 r = rank[size_t(p)];
         out.dual_cells[size_t(r)] = cell_of[size_t(p)];
+        out.sheets[size_t(r)] = sheet_of[size_t(p)];
         for (int k = 0; k < 3; ++k) out.positions[size_t(3 * r + k)] = pos[size_t(3 * p + k)];
       }
     });
-    i64 distinct = 0;
-    for (auto &ch : chunks_) distinct += i64(ch.cells.size());
-    out.split = nv - distinct;
   }
 
  private:
@@ -767,6 +776,7 @@ class Net {
       for (const auto &g : ch.rings) {
         const i64 x = g[0], y = g[1], z = g[2];
         const int b = int(g[3]), d = 2 * b + 1;
+        if (!counted(z)) continue;
         const Cell *lo = find(x, y, z);
         const Cell *hi = find(x + (b == 0), y + (b == 1), z + (b == 2));
         const int mode = lo->mode(d);
@@ -785,6 +795,23 @@ class Net {
           ++out.unresolved;
         } else {
           ++out.outside;
+        }
+      }
+    }
+  }
+
+  bool counted(i64 z) const { return z >= o_.count_lo && (o_.count_hi < 0 || z < o_.count_hi); }
+
+  // Vertices added by splits, and places left pinched, of the counted layers.
+  void count_cells(NetResult &out) const {
+    for (i64 z = 0; z <= Z_; ++z) {
+      if (!counted(z)) continue;
+      for (i64 y = 0; y <= Y_; ++y) {
+        const Row &r = rows_[size_t(z * (Y_ + 1) + y)];
+        for (const Cell *c = r.begin; c != r.end; ++c) {
+          out.split += c->nsheets - 1;
+          out.unresolved += c->pinched;
+          out.outside += c->pinched_out;
         }
       }
     }
@@ -839,7 +866,7 @@ class Net {
   }
 
   void fill(Chunk &ch, i64 *corners, u8 *flip, i64 *pairs, i32 *sides, i64 *cell_of,
-            u8 *junction, i64 *nb, i64 *nboff) {
+            u8 *sheet_of, u8 *junction, i64 *nb, i64 *nboff) {
     const i64 cy = Y_ + 1;
     auto row = [&](i64 y, i64 z) {
       return (y < 0 || z < 0 || y > Y_ || z > Z_) ? Row{} : rows_[size_t(z * cy + y)];
@@ -864,6 +891,7 @@ class Net {
           i64 write[8];
           for (int s = 0, e = 0; s < c->nsheets; ++s) {
             cell_of[c->first + s] = id;
+            sheet_of[c->first + s] = u8(s);
             junction[c->first + s] = u8((c->junction >> s) & 1);
             nboff[c->first + s] = c->nbfirst + e;
             write[s] = c->nbfirst + e;
@@ -976,7 +1004,7 @@ class Net {
     iso::parallel_for(nv, o_.threads, 1 << 15, [&](int, i64 b, i64 e) {
       for (i64 p = b; p < e; ++p) {
         const i64 id = cell_of[size_t(p)];
-        const i64 c[3] = {id % cx, (id / cx) % cy, id / (cx * cy)};
+        const i64 c[3] = {id % cx, (id / cx) % cy, id / (cx * cy) + o_.z_offset};
         for (int k = 0; k < 3; ++k) {
           centers[size_t(3 * p + k)] = pos[size_t(3 * p + k)] = double(c[k]) - 0.5;
         }
@@ -1185,7 +1213,8 @@ void bind_label_type(nb::module_ &m) {
   m.def(
       "label_net",
       [](Samples3<T> f, Int64s wanted, double background, double vmin, double vmax,
-         int iterations, double relaxation, double constraint, bool reverse, int threads) {
+         int iterations, double relaxation, double constraint, bool reverse, int threads,
+         i64 z_offset, i64 count_lo, i64 count_hi) {
         if (wanted.ndim() != 1) throw std::invalid_argument("wanted labels: (L,) int64");
         if (iterations < 0) throw std::invalid_argument("iterations must be >= 0");
         const bool fits = background >= double(std::numeric_limits<T>::lowest()) &&
@@ -1200,17 +1229,23 @@ void bind_label_type(nb::module_ &m) {
           const LabelIndex index(wanted.data(), i64(wanted.shape(0)),
                                  std::min(vmin, background), std::max(vmax, background));
           Net<T> net(f.data(), i64(f.shape(0)), i64(f.shape(1)), i64(f.shape(2)), bg, index,
-                     NetOptions{iterations, relaxation, constraint, reverse, threads});
+                     NetOptions{iterations, relaxation, constraint, reverse, threads, z_offset,
+                                count_lo, count_hi});
           net.run(r);
         }
         return nb::make_tuple(give(std::move(r.positions), 3), give(std::move(r.dual_cells)),
-                              give(std::move(r.corners), 4), give(std::move(r.pairs), 2),
-                              give(std::move(r.sides), 2), r.split, r.unresolved, r.outside);
+                              give(std::move(r.sheets)), give(std::move(r.corners), 4),
+                              give(std::move(r.pairs), 2), give(std::move(r.sides), 2), r.split,
+                              r.unresolved, r.outside);
       },
       "f"_a.noconvert(), "wanted"_a, "background"_a, "vmin"_a, "vmax"_a, "iterations"_a,
-      "relaxation"_a, "constraint"_a, "reverse"_a, "threads"_a,
+      "relaxation"_a, "constraint"_a, "reverse"_a, "threads"_a, "z_offset"_a = 0,
+      "count_lo"_a = 0, "count_hi"_a = -1,
       "The surface net of a (Z, Y, X) label volume: (positions (V, 3) in index units, "
-      "dual_cells (V,), corners (Q, 4), pairs (2Q, 2), sides (Q, 2) int32, split, unresolved, outside).");
+      "dual_cells (V,), sheets (V,) uint8, corners (Q, 4), pairs (2Q, 2), sides (Q, 2) int32, "
+      "split, unresolved, outside). A slab of a larger volume: z_offset its first layer "
+      "(positions in the volume's index units), counts of dual-cell layers "
+      "count_lo <= z < count_hi only (count_hi < 0: all).");
 }
 
 }  // namespace
@@ -1219,6 +1254,31 @@ void bind_labels(nb::module_ &m) {
 #define ISO_BIND(T) bind_label_type<T>(m);
   ISO_FOR_EACH_SAMPLE_TYPE(ISO_BIND)
 #undef ISO_BIND
+  m.def(
+      "first_use_numbering",
+      [](Int64s indices, i64 n) {
+        if (indices.ndim() != 1 || n < 0) {
+          throw std::invalid_argument("first_use_numbering: indices (N,), n >= 0");
+        }
+        const i64 *v = indices.data();
+        const i64 count = i64(indices.shape(0));
+        for (i64 k = 0; k < count; ++k) {
+          if (v[k] < 0 || v[k] >= n) throw std::invalid_argument("first_use_numbering: index out of range");
+        }
+        Vec<i64> rank(static_cast<size_t>(n));
+        {
+          nb::gil_scoped_release unlocked;
+          std::fill(rank.begin(), rank.end(), i64(-1));
+          i64 next = 0;
+          for (i64 k = 0; k < count; ++k) {
+            if (rank[size_t(v[k])] < 0) rank[size_t(v[k])] = next++;
+          }
+        }
+        return give(std::move(rank));
+      },
+      "indices"_a, "n"_a,
+      "rank (n,) int64: each of 0..n-1 numbered in the order it first comes in indices "
+      "(-1 where it never does), as label_net numbers vertices by their first quad corner.");
   m.def(
       "label_meshes",
       [](Int64s corners, Doubles vertices, nb::ndarray<const i32, nb::c_contig, nb::device::cpu> sides,

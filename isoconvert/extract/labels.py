@@ -93,6 +93,8 @@ from ..errors import LevelError, VolumeError
 from ..mesh import Mesh
 from ..threads import kernel_threads
 from ..volume import Volume
+from .blocks import Blocks
+from .label_blocks import MergedNet, merge_slabs, run_slabs, slab_jobs, wants_blocks
 from .placement import mesh_info, reversed_orientation
 from .prepare import kernel_type
 
@@ -204,6 +206,7 @@ def label_surfaces(
     background: int = 0,
     smoothing: SmoothingOptions | int | None = None,
     on_status: Callable[[str], None] | None = None,
+    blocks: Blocks | None = None,
 ) -> LabelMeshes:
     """Extract the surface of every label of a label volume (Surface Nets).
 
@@ -222,6 +225,11 @@ def label_surfaces(
     on_status : callable or None
         Receives one-line notices (non-manifold configurations split, and where
         a label could not be kept manifold).
+    blocks : Blocks or None
+        Build the net slab by slab (:mod:`isoconvert.extract.label_blocks`) when
+        asked for (a slab size, a Dask scheduler) or when the volume is read from
+        its file and is larger than the budget allows for one slab; the result is
+        the same, bit for bit. None: in memory.
 
     Returns
     -------
@@ -237,27 +245,40 @@ def label_surfaces(
         Nothing but background in the volume.
     """
     options = _smoothing_options(smoothing)
-    samples = _label_samples(volume)
+    _check_3d(volume)
     background = _whole(background, "--background", volume.source)
     threads = kernel_threads()
-    vmin, vmax, present = _present_labels(samples, volume.source, threads)
-    wanted, _ = _wanted_labels(present, labels, background, volume.source)
-    samples = _fit_background(samples, background)
-
     # a left-handed index-to-world map mirrors the surface: the kernel writes every quad reversed
     reverse = reversed_orientation(volume, False)
-    positions, dual_cells, corners, pairs, sides, split, unresolved, outside = _native.label_net(
-        samples,
-        wanted,
-        float(background),
-        vmin,
-        vmax,
-        int(options.iterations),
-        float(options.relaxation),
-        float(options.constraint),
-        bool(reverse),
-        threads,
-    )
+    itemsize = kernel_type(_kernel_labels(np.zeros(1, volume.dtype), volume.source), "").itemsize
+    if wants_blocks(volume, blocks, itemsize):
+        net = _net_in_slabs(volume, labels, background, options, reverse, blocks, itemsize,
+                            on_status)  # fmt: skip
+        wanted = net.wanted
+        positions, dual_cells, corners, pairs, sides = (
+            net.positions, net.dual_cells, net.corners, net.pairs, net.sides)  # fmt: skip
+        split, unresolved, outside, vmin, vmax = (
+            net.split, net.unresolved, net.outside, net.vmin, net.vmax)  # fmt: skip
+    else:
+        samples = _label_samples(volume)
+        vmin, vmax, present = _present_labels(samples, volume.source, threads)
+        wanted, _ = _wanted_labels(present, labels, background, volume.source)
+        samples = _fit_background(samples, background)
+        positions, dual_cells, _, corners, pairs, sides, split, unresolved, outside = (
+            _native.label_net(
+                samples,
+                wanted,
+                float(background),
+                vmin,
+                vmax,
+                int(options.iterations),
+                float(options.relaxation),
+                float(options.constraint),
+                bool(reverse),
+                threads,
+            )
+        )
+        del samples
     if len(corners) == 0:
         raise LevelError(f"{volume.source}: no label surface (every sample is background)")
     if (split or unresolved or outside) and on_status:
@@ -297,6 +318,35 @@ def label_surfaces(
     return result
 
 
+def _net_in_slabs(
+    volume: Volume,
+    labels: Iterable[int] | None,
+    background: int,
+    options: SmoothingOptions,
+    reverse: bool,
+    blocks: Blocks,
+    itemsize: int,
+    on_status: Callable[[str], None] | None,
+) -> MergedNet:
+    """The net of ``volume`` built slab by slab (see :mod:`.label_blocks`), with the
+    labels checked against every slab's once all are seen."""
+    asked = None
+    if labels is not None:  # checked for form now, against the volume at the end
+        asked = np.unique(np.array([_whole(v, "--label", volume.source) for v in labels],
+                                   dtype=np.int64))  # fmt: skip
+    jobs = slab_jobs(volume, asked, background, options.iterations, options.relaxation,
+                     options.constraint, reverse, blocks, itemsize, on_status)  # fmt: skip
+    slabs = []
+    results = run_slabs(volume, jobs, blocks.scheduler, blocks.budget)
+    try:
+        slabs.extend(results)
+    finally:
+        results.close()
+    present = np.unique(np.concatenate([s.present for s in slabs]))
+    wanted, _ = _wanted_labels(present, labels, background, volume.source)
+    return merge_slabs(slabs, wanted)
+
+
 # --- input ----------------------------------------------------------------------------
 
 
@@ -312,19 +362,30 @@ def _smoothing_options(smoothing: SmoothingOptions | int | None) -> SmoothingOpt
     return SmoothingOptions(iterations=int(smoothing))
 
 
-def _label_samples(volume: Volume) -> np.ndarray:
-    """The samples of a label volume as the kernels take them: (Z, Y, X), C-contiguous,
-    one of the kernels' types (a view when they already are). Float samples are
-    compared as they are (exact for whole numbers, which the label scan checks)."""
+def _check_3d(volume: Volume) -> None:
     if volume.ndim != 3:
         raise VolumeError(
             f"{volume.source}: label surfaces need a 3D volume, got shape {volume.shape}; "
             "use a 3D label volume (a stack of slices)"
         )
-    data = volume.data
+    kind = np.dtype(volume.dtype)
+    if kind != np.bool_ and not np.issubdtype(kind, np.integer):
+        if not np.issubdtype(kind, np.floating):
+            raise VolumeError(f"{volume.source}: samples of type {kind} are not labels")
+
+
+def _label_samples(volume: Volume) -> np.ndarray:
+    """The samples of a label volume as the kernels take them: (Z, Y, X), C-contiguous,
+    one of the kernels' types (a view when they already are)."""
+    _check_3d(volume)
+    return kernel_type(_kernel_labels(volume.data, volume.source).T, volume.source)
+
+
+def _kernel_labels(data: np.ndarray, source: str) -> np.ndarray:
+    """Label samples in a type :func:`kernel_type` takes, exactly (any axis order). Float
+    samples are compared as they are (exact for whole numbers, which the label
+    scan checks)."""
     if data.dtype != bool and not np.issubdtype(data.dtype, np.integer):
-        if not np.issubdtype(data.dtype, np.floating):
-            raise VolumeError(f"{volume.source}: samples of type {data.dtype} are not labels")
         if data.dtype.itemsize < 4:  # float16: no kernel of its own, exact in float32
             data = data.astype(np.float32)
     if np.issubdtype(data.dtype, np.integer) and data.dtype.itemsize == 8 and data.size:
@@ -332,7 +393,7 @@ def _label_samples(volume: Volume) -> np.ndarray:
         lo, hi = int(data.min()), int(data.max())
         if -(2**31) <= lo and hi < 2**31:
             data = data.astype(np.int32)
-    return kernel_type(data.T, volume.source)
+    return data
 
 
 def _present_labels(

@@ -1,0 +1,506 @@
+"""Label surfaces block-wise: z-slabs with a halo, the in-memory net bit for bit.
+
+A label volume larger than memory (or than ``--max-memory``), or one sent to a
+Dask cluster, is cut into z-slabs. Each slab *owns* the dual-cell layers
+``k0 <= k < k1`` (dual layer k lies between sample layers k - 1 and k): their
+vertices, and the quads whose lowest corner lies on them. It is read with a halo
+of :func:`halo_layers` sample layers each way, and its net is built by the same
+kernel as the whole volume's (``_native.label_net``) with the slab's first layer
+as its z offset, so that positions are the volume's own index coordinates.
+
+Why the halo makes the owned part exact: the kernel treats the slab's ends as
+background, which changes the dual cells of its first and last layer. Every
+other decision is local: a cell's sheets depend on its 2x2x2 block; the rings
+paired the other way (three rounds at most) change cells one layer further per
+round; a vertex's stencil is its neighbouring cells'; and each relaxation
+iteration reads the neighbours' positions of the one before, one layer further.
+So the vertices of layer k are those of the whole volume, to the bit, when the
+slab reaches ``iterations + HALO_MARGIN`` layers beyond k both ways (or the
+grid's end). Sums run in the same order (the stencil's order is the cell's own),
+from the same starting coordinates, so the rounding is the same too.
+
+The whole volume's order is rebuilt from keys, never from positions:
+
+- quads: the kernel orders them by axis, then interior / low side / high side,
+  then (x, y, z) of their lowest corner (see ``src/labels.cpp``); a quad's key
+  encodes exactly that, so the owned quads of every slab, sorted by key, are in
+  the whole volume's order;
+- vertices: a dual cell's vertices are its sheets, numbered by the cell's own
+  faces, so ``16 * dual cell + sheet`` names a vertex in every slab that builds
+  it; the whole volume numbers vertices by their first quad corner, before
+  reversed quads are turned (corner 0 of an unturned quad is its lowest cell).
+
+Slabs run here, the next one read while one is built, or as tasks of a Dask
+cluster (:func:`isoconvert.extract.blocks.dask_runner` with
+:func:`label_slab_task`); the client merges what they return
+(:func:`merge_slabs`). Memory holds a few slabs and the surfaces being merged,
+never the volume.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .. import _native
+from ..errors import IsoconvertError, VolumeError
+from ..grid import LazyGrid, SlabReader
+from ..runner import TaskFailure, cluster_size, worker_threads
+from ..runner.local import read_ahead
+from ..threads import kernel_threads
+from ..volume import Volume
+from .blocks import Blocks, dask_runner, read_block, slab_ranges
+from .prepare import kernel_type
+
+#: Layers of halo beyond the smoothing iterations: one for the dual cells at a
+#: slab's end (which see the background), three for the rounds of rings paired
+#: the other way, one for a vertex's stencil, and three to spare.
+HALO_MARGIN = 8
+
+#: Bits of a vertex key taken by the sheet (a dual cell has at most 12 sheets).
+SHEET_BITS = 4
+
+#: Slabs per thread of a Dask cluster, when the budget would make fewer.
+_SLABS_PER_THREAD = 4
+
+#: Copies of a slab's samples alive at once: the one being meshed, its kernel-type
+#: copy, and the next one being read.
+_SLAB_COPIES = 3
+
+
+def halo_layers(iterations: int) -> int:
+    """Sample layers read beyond a slab's own each way: exact for ``iterations``."""
+    return int(iterations) + HALO_MARGIN
+
+
+@dataclass(frozen=True)
+class LabelSlabJob:
+    """One slab of a label volume, as a worker needs it besides its samples.
+
+    Attributes
+    ----------
+    k0, k1 : int
+        Owned dual-cell layers ``k0 <= k < k1`` (the last slab owns layer Z).
+    z0, z1 : int
+        Sample layers read, ``[z0, z1)``: the owned ones and the halo.
+    wanted : (L,) int64 or None
+        The labels to extract, sorted; None: every label of the slab but the
+        background.
+    background : int
+    iterations : int
+    relaxation, constraint : float
+        The smoothing (:class:`~isoconvert.extract.labels.SmoothingOptions`).
+    reverse : bool
+        Quads turned (a left-handed index-to-world map).
+    grid_shape : (int, int, int)
+        (X, Y, Z) of the whole volume.
+    threads : int
+    source : str
+        For messages.
+    """
+
+    k0: int
+    k1: int
+    z0: int
+    z1: int
+    wanted: np.ndarray | None
+    background: int
+    iterations: int
+    relaxation: float
+    constraint: float
+    reverse: bool
+    grid_shape: tuple[int, int, int]
+    threads: int
+    source: str
+
+    @property
+    def read_range(self) -> tuple[int, int]:
+        """Sample layers to read (the name :func:`~isoconvert.extract.blocks.dask_runner` uses)."""
+        return self.z0, self.z1
+
+
+@dataclass
+class LabelSlab:
+    """What one slab contributes: its own vertices and quads.
+
+    Attributes
+    ----------
+    vmin, vmax : float
+        The range of the slab's samples (halo included).
+    present : (P,) int64
+        The values in the slab's samples, sorted.
+    vertex_keys : (V,) int64
+        ``16 * dual cell + sheet`` of each owned vertex (dual cells numbered
+        over the whole volume, as ``LabelMeshes.dual_cells``), in the kernel's order.
+    positions : (V, 3) float64
+        Their positions in the volume's index units.
+    first_keys : (F,) int64
+        The keys of the owned vertices on the first owned layer, sorted: the slab
+        before finds the vertices its quads share with this one among them.
+    first_index : (F,) int64
+        Where those vertices are among ``vertex_keys``.
+    quad_keys : (Q,) int64
+        The sort key of each owned quad: axis and side group, then x, y, z of its
+        lowest corner.
+    corners : (Q, 4) int64
+        Its corners, lowest cell first (before turning): ``c >= 0`` the owned
+        vertex ``c``, ``c < 0`` the next slab's vertex ``next_keys[-1 - c]``.
+    next_keys : (N,) int64
+        Keys of the next slab's vertices the quads use, sorted.
+    turned : (Q,) bool
+        Whether the kernel turned the quad (corners in reverse order).
+    pairs : (Q, 2) int64
+        Label inside and outside.
+    split, unresolved, outside : int
+        The kernel's counts for the owned layers.
+    """
+
+    vmin: float
+    vmax: float
+    present: np.ndarray
+    vertex_keys: np.ndarray
+    positions: np.ndarray
+    first_keys: np.ndarray
+    first_index: np.ndarray
+    quad_keys: np.ndarray
+    corners: np.ndarray
+    next_keys: np.ndarray
+    turned: np.ndarray
+    pairs: np.ndarray
+    split: int = 0
+    unresolved: int = 0
+    outside: int = 0
+
+
+@dataclass
+class MergedNet:
+    """The whole volume's net, as ``_native.label_net`` gives it."""
+
+    positions: np.ndarray
+    dual_cells: np.ndarray
+    corners: np.ndarray
+    pairs: np.ndarray
+    sides: np.ndarray
+    split: int
+    unresolved: int
+    outside: int
+    vmin: float
+    vmax: float
+    present: np.ndarray
+    wanted: np.ndarray
+
+
+def wants_blocks(volume: Volume, blocks: Blocks | None, itemsize: int) -> bool:
+    """Whether to build ``volume``'s net slab by slab: asked for (``--block-size``,
+    a scheduler), or read from its file and larger than one slab's share of the
+    budget. A volume that fits is built whole (no halo, no merge)."""
+    if blocks is None or volume.ndim != 3:
+        return False
+    if blocks.asked:
+        return True
+    if volume.grid is None:
+        return False
+    return _layers(volume.shape, itemsize, blocks) < volume.shape[2]
+
+
+def _layers(shape: tuple[int, ...], itemsize: int, blocks: Blocks) -> int:
+    """Sample layers a slab may read within half the budget."""
+    if blocks.size is not None:
+        return blocks.size
+    layer = shape[0] * shape[1] * max(itemsize, 1) * _SLAB_COPIES
+    return max(1, blocks.budget // 2 // layer)
+
+
+def slab_jobs(
+    volume: Volume,
+    wanted: np.ndarray | None,
+    background: int,
+    iterations: int,
+    relaxation: float,
+    constraint: float,
+    reverse: bool,
+    blocks: Blocks,
+    itemsize: int,
+    on_status: Callable[[str], None] | None = None,
+) -> list[LabelSlabJob]:
+    """The slabs of ``volume``: ``--block-size`` owned layers each, or what fits
+    the budget with the halo; on a cluster, enough for each of its threads."""
+    nx, ny, nz = (int(n) for n in volume.shape)
+    halo = halo_layers(iterations)
+    if blocks.size is not None:
+        own = blocks.size
+    else:
+        fits = _layers(volume.shape, itemsize, blocks)
+        # at least as many owned layers as the halo: thinner slabs would read
+        # the volume more than three times over
+        own = max(fits - 2 * halo - 2, halo)
+        if own + 2 * halo + 2 > fits and on_status:
+            slab = (own + 2 * halo + 2) * nx * ny * itemsize * _SLAB_COPIES
+            on_status(
+                f"note: label slabs read {halo} layers beyond their own each way (smoothing "
+                f"reaches that far), {slab / 2**20:.0f} MiB at once, more than --max-memory "
+                "allows for samples"
+            )
+        if blocks.scheduler is not None:
+            threads = max(1, cluster_size(blocks.scheduler))
+            own = max(1, min(own, -(-(nz + 1) // (_SLABS_PER_THREAD * threads))))
+    # dual layers 0..Z: Z + 1 of them
+    ranges = slab_ranges(nz + 1, own)
+    return [
+        LabelSlabJob(
+            k0=k0,
+            k1=k1,
+            z0=max(0, k0 - 1 - halo),
+            z1=min(nz, k1 + 1 + halo),
+            wanted=wanted,
+            background=background,
+            iterations=iterations,
+            relaxation=relaxation,
+            constraint=constraint,
+            reverse=reverse,
+            grid_shape=(nx, ny, nz),
+            threads=kernel_threads(),
+            source=volume.source,
+        )
+        for k0, k1 in ranges
+    ]
+
+
+def run_label_slab(job: LabelSlabJob, zyx: np.ndarray) -> LabelSlab:
+    """Build one slab's net and keep what it owns.
+
+    Parameters
+    ----------
+    job : LabelSlabJob
+    zyx : (z1 - z0, Y, X) array
+        The slab's samples.
+
+    Raises
+    ------
+    VolumeError
+        Samples that are not whole numbers.
+    """
+    from .labels import _fit_background, _kernel_labels
+
+    samples = kernel_type(_kernel_labels(zyx, job.source), job.source)
+    vmin, vmax, bad, present = _native.label_presence(samples, job.threads)
+    if bad:
+        raise VolumeError(
+            f"{job.source}: {bad} samples of z-layers {job.z0}..{job.z1 - 1} are not whole "
+            "numbers (within +-2**53), so this is not a label volume; use an isosurface "
+            "method (cubes) or round the labels first"
+        )
+    present = np.asarray(np.unique(samples) if present is None else present).astype(np.int64)
+    wanted = present[present != job.background] if job.wanted is None else job.wanted
+    if not len(wanted):
+        return _empty_slab(vmin, vmax, present)
+    samples = _fit_background(samples, job.background)
+    positions, dual, sheets, corners, pairs, _, split, unresolved, outside = _native.label_net(
+        samples,
+        wanted,
+        float(job.background),
+        vmin,
+        vmax,
+        job.iterations,
+        job.relaxation,
+        job.constraint,
+        job.reverse,
+        job.threads,
+        job.z0,
+        job.k0 - job.z0,
+        job.k1 - job.z0,
+    )
+    nx, ny, nz = job.grid_shape
+    layer = (nx + 1) * (ny + 1)
+    dual = dual + job.z0 * layer
+    keys = dual * (1 << SHEET_BITS) + sheets
+    z = dual // layer
+    own = (z >= job.k0) & (z < job.k1)
+    local = np.cumsum(own) - 1  # a kernel vertex's place among the owned ones
+    following = np.flatnonzero(z == job.k1)
+    next_keys = keys[following]
+    by_key = np.argsort(next_keys)
+    next_keys = next_keys[by_key]
+    local[following[by_key]] = -1 - np.arange(len(following))
+    first = np.flatnonzero(z == job.k0)
+    first_keys = keys[first]
+    by_key = np.argsort(first_keys)
+
+    cells = dual[corners]  # (Q, 4)
+    turned = cells[:, 0] != cells.min(axis=1)
+    # unturned, a quad's corners are (0, 0), (1, 0), (1, 1), (0, 1) from its lowest cell
+    low = np.where(turned, cells[:, 3], cells[:, 0])
+    qz = low // layer
+    mine = (qz >= job.k0) & (qz < job.k1)
+    corners, cells, low, qz, turned = corners[mine], cells[mine], low[mine], qz[mine], turned[mine]
+    corners = np.where(turned[:, None], corners[:, ::-1], corners)
+    step = np.where(turned, cells[:, 2], cells[:, 1]) - low
+    qx, qy = low % (nx + 1), (low // (nx + 1)) % (ny + 1)
+    # axis 0 steps along y first, axis 1 along z, axis 2 along x
+    axis = np.where(step == nx + 1, 0, np.where(step == layer, 1, 2))
+    along = np.choose(axis, [qx, qy, qz])
+    top = np.choose(axis, [nx, ny, nz])
+    group = 3 * axis + np.where(along == 0, 1, np.where(along == top, 2, 0))
+    return LabelSlab(
+        vmin=float(vmin),
+        vmax=float(vmax),
+        present=present,
+        vertex_keys=keys[own],
+        positions=positions[own],
+        first_keys=first_keys[by_key],
+        first_index=local[first[by_key]],
+        quad_keys=((group * (nx + 1) + qx) * (ny + 1) + qy) * (nz + 1) + qz,
+        corners=local[corners],
+        next_keys=next_keys,
+        turned=turned,
+        pairs=pairs[0::2][mine],
+        split=int(split),
+        unresolved=int(unresolved),
+        outside=int(outside),
+    )
+
+
+def _empty_slab(vmin: float, vmax: float, present: np.ndarray) -> LabelSlab:
+    none = np.empty(0, np.int64)
+    return LabelSlab(
+        vmin=float(vmin),
+        vmax=float(vmax),
+        present=present,
+        vertex_keys=none,
+        positions=np.empty((0, 3)),
+        first_keys=none,
+        first_index=none,
+        quad_keys=none,
+        corners=np.empty((0, 4), np.int64),
+        next_keys=none,
+        turned=np.empty(0, bool),
+        pairs=np.empty((0, 2), np.int64),
+    )
+
+
+def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
+    """The whole volume's net from its slabs (in z order): the arrays of
+    ``_native.label_net`` on the whole volume, in its order, to the bit.
+
+    Parameters
+    ----------
+    slabs : list of LabelSlab
+    wanted : (L,) int64
+        The labels extracted, sorted (``sides`` index them).
+
+    Raises
+    ------
+    IsoconvertError
+        A quad corner that the next slab does not own (a bug, never a weld).
+    """
+    starts = np.cumsum([0] + [len(s.vertex_keys) for s in slabs])
+    refs = []
+    for n, slab in enumerate(slabs):
+        corners = slab.corners + starts[n]
+        if len(slab.next_keys):
+            after = slabs[n + 1] if n + 1 < len(slabs) else None
+            at = None if after is None else np.searchsorted(after.first_keys, slab.next_keys)
+            if at is None or not np.array_equal(
+                after.first_keys[np.minimum(at, len(after.first_keys) - 1)], slab.next_keys
+            ):
+                raise IsoconvertError(
+                    "internal error: a label slab's quad uses a vertex no slab owns"
+                )
+            shared = slab.corners < 0
+            corners[shared] = (starts[n + 1] + after.first_index[at])[-1 - slab.corners[shared]]
+        refs.append(corners)
+    order = np.argsort(np.concatenate([s.quad_keys for s in slabs]), kind="stable")
+    refs = np.concatenate(refs)[order]
+    turned = np.concatenate([s.turned for s in slabs])[order]
+    pairs = np.concatenate([s.pairs for s in slabs])[order]
+    # vertices numbered by their first quad corner, quads not yet turned
+    nv = int(starts[-1])
+    rank = _native.first_use_numbering(refs.reshape(-1), nv)
+    if nv and rank.min() < 0:
+        raise IsoconvertError("internal error: a label slab owns a vertex of no quad")
+    corners = rank[refs]
+    corners[turned] = corners[turned, ::-1]
+    positions = np.empty((nv, 3))
+    positions[rank] = np.concatenate([s.positions for s in slabs])
+    dual_cells = np.empty(nv, np.int64)
+    dual_cells[rank] = np.concatenate([s.vertex_keys for s in slabs]) >> SHEET_BITS
+    sides = np.searchsorted(wanted, pairs).astype(np.int32)
+    found = sides < len(wanted)
+    found[found] = wanted[sides[found]] == pairs[found]
+    sides[~found] = -1
+    present = np.unique(np.concatenate([s.present for s in slabs]))
+    return MergedNet(
+        positions=positions,
+        dual_cells=dual_cells,
+        corners=corners,
+        pairs=np.repeat(pairs, 2, axis=0),
+        sides=sides,
+        split=sum(s.split for s in slabs),
+        unresolved=sum(s.unresolved for s in slabs),
+        outside=sum(s.outside for s in slabs),
+        vmin=min(s.vmin for s in slabs),
+        vmax=max(s.vmax for s in slabs),
+        present=present,
+        wanted=wanted,
+    )
+
+
+def run_slabs(volume: Volume, jobs: list[LabelSlabJob], scheduler: str | None, budget: int):
+    """Each job's :class:`LabelSlab`, in order: here (the next slab read while one
+    is built) or on the Dask cluster at ``scheduler``."""
+    if scheduler is not None:
+        runner = dask_runner(
+            scheduler, volume.samples, volume.source, label_slab_task, max_bytes=budget
+        )
+        return runner(jobs)
+    return _run_here(volume.samples, jobs)
+
+
+def _run_here(source, jobs: list[LabelSlabJob]) -> Iterator[LabelSlab]:
+    reader = SlabReader(source)
+    for job, zyx in read_ahead(
+        jobs, lambda job: reader.read(job.z0, job.z1), lambda job: reader.ready(job.z0, job.z1)
+    ):
+        yield run_label_slab(job, zyx)
+        del zyx
+
+
+def label_slab_task(job: LabelSlabJob, samples) -> LabelSlab | TaskFailure:
+    """One slab as a task of a cluster: read it (unless sent), build it.
+
+    Parameters
+    ----------
+    job : LabelSlabJob
+        Its ``threads`` is replaced by the worker's (the net is the same for any number).
+    samples : LazyGrid or (z1 - z0, Y, X) array
+        The grid to read the slab from, or the slab itself.
+    """
+    from .blocks import _unreadable
+
+    try:
+        job = replace(job, threads=worker_threads())
+        if isinstance(samples, LazyGrid):
+            try:
+                samples = read_block(samples, job)
+            except OSError as exc:
+                raise IsoconvertError(_unreadable(samples, job, exc)) from None
+        return run_label_slab(job, samples)
+    except IsoconvertError as exc:
+        return TaskFailure.of(exc)
+
+
+__all__ = [
+    "HALO_MARGIN",
+    "LabelSlab",
+    "LabelSlabJob",
+    "MergedNet",
+    "halo_layers",
+    "label_slab_task",
+    "merge_slabs",
+    "run_label_slab",
+    "run_slabs",
+    "slab_jobs",
+    "wants_blocks",
+]
