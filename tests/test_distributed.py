@@ -505,6 +505,55 @@ def test_batch_on_a_cluster_is_byte_identical(dask_processes, tmp_path):
         assert (tmp_path / "there" / name).read_bytes() == (tmp_path / "here" / name).read_bytes()
 
 
+def _atlas(shape=(20, 18, 40), cells=6, seed=4) -> np.ndarray:
+    """(Z, Y, X) uint16 labels: nearest of a few random seeds, background outside a ball."""
+    rng = np.random.default_rng(seed)
+    points = np.stack(np.meshgrid(*(np.arange(n) for n in shape), indexing="ij"), -1)
+    seeds = rng.uniform(0, shape, size=(cells, 3))
+    nearest = np.argmin(((points[..., None, :] - seeds) ** 2).sum(-1), axis=-1) + 1
+    centre = (np.array(shape) - 1) / 2
+    inside = (((points - centre) / (np.array(shape) / 2)) ** 2).sum(-1) < 1
+    return np.where(inside, nearest, 0).astype(np.uint16)
+
+
+def test_label_surfaces_on_the_cluster_are_the_in_memory_ones(address):
+    from isoconvert.extract.labels import label_surfaces
+
+    volume = Volume(_atlas().T, spacing=(0.5, 1.0, 1.5), direction=np.diag([1.0, 1.0, -1.0]))
+    reference = label_surfaces(volume, smoothing=5)
+    got = label_surfaces(volume, smoothing=5, blocks=Blocks(size=4, scheduler=address))
+    assert got.labels == reference.labels
+    assert got.combined.vertices.tobytes() == reference.combined.vertices.tobytes()
+    assert np.array_equal(got.combined.cells, reference.combined.cells)
+    for label in reference.labels:
+        assert got[label].vertices.tobytes() == reference[label].vertices.tobytes()
+        assert np.array_equal(got[label].cells, reference[label].cells)
+
+
+def test_cli_label_layer_on_a_cluster_is_byte_identical(dask_processes, tmp_path):
+    """A Neuroglancer layer (meshes, two levels of detail, the voxels) of a label
+    volume: the same bytes in memory, slab by slab here, and on the cluster,
+    where the workers read their own slabs of the file."""
+    pytest.importorskip("DracoPy")
+    pytest.importorskip("meshoptimizer")
+    np.save(tmp_path / "atlas.npy", _atlas())
+    runs = {"memory": [], "slabs": ["--block-size", 7], "cluster": ["--scheduler", dask_processes]}
+    for name, extra in runs.items():
+        run = _cli(
+            "convert", "atlas.npy", "--labels", "-o", name, "--format", "precomputed",
+            "--lods", 2, "--with-volume", *extra, cwd=tmp_path,
+        )  # fmt: skip
+        assert run.returncode == 0, run.stderr
+    files = {
+        name: {str(p.relative_to(tmp_path / name)): p.read_bytes()
+               for p in (tmp_path / name).rglob("*") if p.is_file()}
+        for name in runs
+    }  # fmt: skip
+    assert len([f for f in files["memory"] if f.endswith(".index")]) == 6
+    assert files["slabs"] == files["memory"]
+    assert files["cluster"] == files["memory"]
+
+
 # --- workers that die (last: the LocalCluster's nannies restart them) ------------------------
 
 

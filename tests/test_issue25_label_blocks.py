@@ -1,0 +1,200 @@
+"""Label surfaces slab by slab (issue 25): the in-memory net, bit for bit.
+
+A label volume larger than ``--max-memory``, or one given ``--block-size`` or a
+Dask scheduler, is meshed in z-slabs read with a halo and merged by key
+(:mod:`isoconvert.extract.label_blocks`). Every array of the result must be the
+one the whole volume gives: positions to the bit (the smoothing's sums in the
+same order), vertices and triangles in the same order, the same counts.
+The cluster's runs are in tests/test_distributed.py.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import dataset
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from isoconvert import read_volume
+from isoconvert.errors import IsoconvertError, LevelError, VolumeError
+from isoconvert.extract import label_blocks
+from isoconvert.extract.blocks import Blocks
+from isoconvert.extract.labels import label_surfaces
+from isoconvert.grid import RawGrid
+from isoconvert.volume import Volume
+
+
+def _same(a, b) -> None:
+    """Every array and count of two LabelMeshes equal, bit for bit."""
+    assert a.labels == b.labels
+    np.testing.assert_array_equal(a.combined.vertices, b.combined.vertices, strict=True)
+    np.testing.assert_array_equal(a.combined.cells, b.combined.cells, strict=True)
+    np.testing.assert_array_equal(a.boundary_labels, b.boundary_labels, strict=True)
+    np.testing.assert_array_equal(a.dual_cells, b.dual_cells, strict=True)
+    assert (a.split_vertices, a.unresolved, a.unresolved_outside) == (
+        b.split_vertices,
+        b.unresolved,
+        b.unresolved_outside,
+    )
+    assert a.value_range == b.value_range
+    for label in a.labels:
+        np.testing.assert_array_equal(a[label].vertices, b[label].vertices, strict=True)
+        np.testing.assert_array_equal(a[label].cells, b[label].cells, strict=True)
+        np.testing.assert_array_equal(a.vertex_map[label], b.vertex_map[label], strict=True)
+        np.testing.assert_array_equal(a.face_map[label], b.face_map[label], strict=True)
+
+
+def _labels(rng: np.random.Generator, shape, kinds: int, blobs: bool) -> np.ndarray:
+    """Random labels: noise (every non-manifold configuration, rings paired the
+    other way) or blobs of a few labels in background."""
+    if blobs:
+        inside = rng.random(shape) < 0.5
+        return (inside * rng.integers(1, kinds + 1, shape)).astype(np.uint8)
+    return rng.integers(0, kinds, shape).astype(np.uint8)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    nz=st.integers(2, 30),
+    kinds=st.integers(2, 4),
+    blobs=st.booleans(),
+    iterations=st.integers(0, 4),
+    size=st.integers(1, 5),
+    mirrored=st.booleans(),
+)
+def test_slabs_give_the_in_memory_net(seed, nz, kinds, blobs, iterations, size, mirrored):
+    rng = np.random.default_rng(seed)
+    data = _labels(rng, (int(rng.integers(2, 7)), int(rng.integers(2, 7)), nz), kinds, blobs)
+    if not data.any():
+        data[0, 0, 0] = 1
+    direction = np.diag([1.0, -1.0, 1.0]) if mirrored else None  # quads turned
+    volume = Volume(data, spacing=(0.7, 1.0, 1.3), origin=(5.0, -2.0, 0.25), direction=direction)
+    reference = label_surfaces(volume, smoothing=iterations)
+    _same(reference, label_surfaces(volume, smoothing=iterations, blocks=Blocks(size=size)))
+
+
+def test_the_halo_is_what_makes_slabs_exact(monkeypatch):
+    """Without the margin (a halo of only the smoothing iterations) some volume's
+    slabs differ from the whole: the test above could fail, and the margin is needed."""
+    rng = np.random.default_rng(11)
+    cases = []
+    for n in range(40):
+        data = _labels(rng, (5, 5, 24), 3, n % 2 == 1)
+        cases.append((Volume(data), int(rng.integers(0, 3))))
+    references = [label_surfaces(v, smoothing=it) for v, it in cases]
+    for (volume, it), reference in zip(cases, references, strict=True):
+        _same(reference, label_surfaces(volume, smoothing=it, blocks=Blocks(size=2)))
+    monkeypatch.setattr(label_blocks, "HALO_MARGIN", 0)
+    differ = 0
+    for (volume, it), reference in zip(cases, references, strict=True):
+        try:
+            _same(reference, label_surfaces(volume, smoothing=it, blocks=Blocks(size=2)))
+        except (AssertionError, IsoconvertError):  # differ, or the slabs disagree
+            differ += 1
+    assert differ > 0
+
+
+@pytest.mark.parametrize(
+    "dtype, values, background, labels",
+    [
+        (np.int64, [0, 3, 2**40, -5], 0, None),  # wider than int32: float64 in the kernel
+        (np.float32, [0.0, 1.0, 7.0], 0, None),
+        (np.int16, [-3, 4, 9, 12], 4, None),  # a background that is not 0
+        (np.uint16, [0, 1, 2, 3, 5], 0, [2, 5]),  # some labels only
+        (np.bool_, [False, True], 0, None),
+    ],
+)
+def test_slabs_of_every_label_type(dtype, values, background, labels):
+    rng = np.random.default_rng(3)
+    data = np.asarray(values, dtype=dtype)[rng.integers(0, len(values), (6, 7, 26))]
+    data[:2] = values[0]  # runs of one value too
+    volume = Volume(data)
+    options = {"labels": labels, "background": background, "smoothing": 3}
+    _same(
+        label_surfaces(volume, **options),
+        label_surfaces(volume, **options, blocks=Blocks(size=3)),
+    )
+
+
+def test_a_file_larger_than_the_budget_is_read_in_slabs(tmp_path, monkeypatch):
+    """A label volume read from its file, over ``--max-memory``, is never read
+    whole: every read is a slab with its halo, and the net is the whole's."""
+    rng = np.random.default_rng(5)
+    data = _labels(rng, (120, 16, 18), 3, True).astype(np.uint32)  # (Z, Y, X) in the file
+    np.save(tmp_path / "labels.npy", data)
+    volume = read_volume(tmp_path / "labels.npy")
+    assert volume.grid is not None
+    reads = []
+    original = RawGrid.read_zyx
+
+    def recording(self, k0, k1):
+        reads.append((k0, k1))
+        return original(self, k0, k1)
+
+    monkeypatch.setattr(RawGrid, "read_zyx", recording)
+    budget = 16 * 18 * 4 * 3 * 2 * 60  # 60 layers of samples per slab
+    got = label_surfaces(volume, smoothing=2, blocks=Blocks(max_memory=budget))
+    assert len(reads) > 2
+    assert max(k1 - k0 for k0, k1 in reads) <= 60 < 120
+    assert reads[0][0] == 0 and reads[-1][1] == 120
+    monkeypatch.setattr(RawGrid, "read_zyx", original)
+    _same(label_surfaces(Volume(data.T), smoothing=2), got)
+    # within the budget no slab is read: the volume is meshed whole
+    reads.clear()
+    monkeypatch.setattr(RawGrid, "read_zyx", recording)
+    label_surfaces(volume, smoothing=2, blocks=Blocks())
+    assert all(r == (0, 120) for r in reads)
+
+
+def test_bad_label_volumes_in_slabs_fail_in_one_line():
+    data = np.zeros((5, 5, 30), np.float32)
+    data[1:3, 1:3, 2:5] = 1
+    data[2, 2, 25] = 0.5  # in the last slab
+    with pytest.raises(VolumeError, match=r"not whole numbers") as info:
+        label_surfaces(Volume(data), blocks=Blocks(size=4))
+    assert "\n" not in str(info.value) and "z-layers" in str(info.value)
+    data[2, 2, 25] = 1
+    with pytest.raises(VolumeError, match=r"label 4 not in the volume; labels present: 1"):
+        label_surfaces(Volume(data), labels=[4], blocks=Blocks(size=4))
+    with pytest.raises(LevelError, match="every sample is background"):
+        label_surfaces(Volume(np.zeros((4, 4, 12), np.uint8)), blocks=Blocks(size=4))
+
+
+def _cli(*args, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "isoconvert", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def _files(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def test_real_scan_files_and_layers_are_byte_identical(tmp_path):
+    """The bat cochlea's label surface, as PLY files and as a Neuroglancer layer with
+    its voxels and two levels of detail: the same bytes with and without slabs."""
+    scan = dataset("bat-cochlea-volume.tif")
+    for name, extra in [("whole", []), ("slabs", ["--block-size", 16])]:
+        ply = _cli("convert", scan, "--labels", "-o", f"{name}.ply", *extra, cwd=tmp_path)
+        assert ply.returncode == 0, ply.stderr
+        layer = _cli(
+            "convert", scan, "--labels", "-o", f"{name}_layer", "--format", "precomputed",
+            "--lods", 2, "--with-volume", *extra, cwd=tmp_path,
+        )  # fmt: skip
+        assert layer.returncode == 0, layer.stderr
+    whole = (tmp_path / "whole_label255.ply").read_bytes()
+    assert len(whole) > 100_000
+    assert (tmp_path / "slabs_label255.ply").read_bytes() == whole
+    files = _files(tmp_path / "whole_layer")
+    assert len(files) >= 4 and "mesh/255.index" in files
+    assert _files(tmp_path / "slabs_layer") == files
