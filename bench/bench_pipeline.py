@@ -25,6 +25,10 @@ the peer), beside the best and median times. The pipelines:
   multi-resolution writer); and one level with the labels' voxels (``--with-volume``)
   against the same script writing them too (compressed_segmentation, both uncompressed
   on disk). No target: the formats differ.
+- ``layer-large``: the atlas at 512^3 as uint32 (a 512 MB file) to a layer of one level
+  of detail, within ``--max-memory 256M`` (read in slabs) and whole, against the zmesh +
+  cloud-volume script. Peak memory is printed for every command (``wait4``'s maximum
+  resident size of the process).
 - ``normals``: a 384^3 float32 gyroid (raw) to binary PLY with and without ``--normals``.
   Target 1.3x.
 - ``ct-bound``: the chest CT (DICOM series, 512x512x64, level 300.5 HU) decimated with
@@ -190,7 +194,7 @@ def print_pipeline(title: str, commands: list[Command], pairs: list[tuple[str, s
     """Times of each command; for each (ours, theirs, target or None) the median
     per-round ratio."""
     print(f"\n{title}")
-    head = f"{'command':<46}{'best s':>8}{'median s':>10}{'faces':>12}"
+    head = f"{'command':<46}{'best s':>8}{'median s':>10}{'peak MB':>9}{'faces':>12}"
     print(head)
     print("-" * len(head))
     for c in commands:
@@ -200,7 +204,8 @@ def print_pipeline(title: str, commands: list[Command], pairs: list[tuple[str, s
         counts = ply_counts(c.output) if c.output and c.output.suffix == ".ply" else None
         faces = f"{counts[1]:,}" if counts else ""
         med = statistics.median(c.seconds)
-        print(f"{c.name:<46}{min(c.seconds):>8.3f}{med:>10.3f}{faces:>12}")
+        peak = c.peak_kib * 1024 / 1e6
+        print(f"{c.name:<46}{min(c.seconds):>8.3f}{med:>10.3f}{peak:>9.0f}{faces:>12}")
     by_name = {c.name: c for c in commands}
     for ours, theirs, target in pairs:
         r = round_ratios(by_name[ours], by_name[theirs])
@@ -293,6 +298,37 @@ def layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
     ]
 
 
+def large_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
+    """A 512 MB label volume (the atlas at 512^3, uint32) to a layer, once within a
+    --max-memory of half its size (read in slabs) and once whole, against zmesh +
+    cloud-volume, which hold it whole."""
+    atlas = tmp / "atlas512_uint32.npy"
+    if not atlas.exists():
+        np.save(atlas, np.ascontiguousarray(synthetic_atlas(512).data.T).astype(np.uint32))
+    (tmp / "zmesh_layer.py").write_text(ZMESH_LAYER)
+    base = [exe, "convert", str(atlas), "--labels", "--format", "precomputed", "--lods", "1"]
+    base += ["-f", "-q"]
+    commands = [
+        Command(
+            f"isoconvert 1 level --max-memory {LARGE_BUDGET}",
+            base + ["--max-memory", LARGE_BUDGET, "-o", str(tmp / "big_slabs")],
+        ),
+        Command("isoconvert 1 level, in memory", base + ["-o", str(tmp / "big_whole")]),
+        Command(
+            "zmesh + cloud-volume script (1 level)",
+            [sys.executable, str(tmp / "zmesh_layer.py"), str(atlas), str(tmp / "big_zl")],
+        ),
+    ]
+    return commands, [
+        (commands[0].name, "zmesh + cloud-volume script (1 level)", None),
+        (commands[1].name, "zmesh + cloud-volume script (1 level)", None),
+    ]
+
+
+#: --max-memory of the large layer: half the 512 MB volume.
+LARGE_BUDGET = "256M"
+
+
 def normals_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
     raw = tmp / "gyroid_384.raw"
     gyroid(384)().tofile(raw)
@@ -369,6 +405,10 @@ PIPELINES = {
     "engine": ("engine 256x256x128: largest, smooth 20, decimate 0.9, STL", engine_pipeline),
     "atlas": ("40-label 256^3 atlas: one PLY per label", atlas_pipeline),
     "layer": ("40-label 256^3 atlas: a Neuroglancer precomputed layer", layer_pipeline),
+    "layer-large": (
+        "40-label 512^3 uint32 atlas (512 MB): a layer, within --max-memory and whole",
+        large_layer_pipeline,
+    ),
     "normals": ("gyroid 384^3 float32 -> PLY, with and without --normals", normals_pipeline),
     "ct-print": ("chest CT -> printable STL", ct_print_pipeline),
 }

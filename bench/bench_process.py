@@ -116,17 +116,26 @@ class Command:
     env: dict[str, str] | None = None
     seconds: list[float] = field(default_factory=list)
     note: str = ""
+    peak_kib: int = 0
 
 
 def run_once(cmd: Command) -> float | None:
-    """Run a command to its end; its wall time in seconds, or None (and a note) if it failed."""
-    start = time.perf_counter()
-    proc = subprocess.run(cmd.argv, capture_output=True, text=True, env=cmd.env)
-    seconds = time.perf_counter() - start
-    if proc.returncode != 0:
-        tail = (proc.stderr.strip().splitlines() or ["no message"])[-1]
-        cmd.note = f"exit code {proc.returncode}: {tail}"
-        return None
+    """Run a command to its end; its wall time in seconds, or None (and a note) if it
+    failed. Its peak resident memory (the process's own, from ``wait4``) raises
+    ``cmd.peak_kib``."""
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        start = time.perf_counter()
+        proc = subprocess.Popen(cmd.argv, stdout=out, stderr=err, env=cmd.env)
+        _, status, usage = os.wait4(proc.pid, 0)
+        seconds = time.perf_counter() - start
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        cmd.peak_kib = max(cmd.peak_kib, int(usage.ru_maxrss))  # KiB on Linux
+        if proc.returncode != 0:
+            err.seek(0)
+            text = err.read().decode("utf-8", "replace")
+            tail = (text.strip().splitlines() or ["no message"])[-1]
+            cmd.note = f"exit code {proc.returncode}: {tail}"
+            return None
     return seconds
 
 

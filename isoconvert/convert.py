@@ -363,6 +363,7 @@ def _convert_levels_to_layer(
         legacy=opts.legacy_mesh,
         force=opts.force,
         on_status=on_status,
+        map_objects=layer_objects_on(opts, volume.source),
     )
     name = (lambda n: f"{n}:0") if opts.legacy_mesh else str
     return [
@@ -379,6 +380,57 @@ def refuse_layer_options(opts: ConvertOptions, writer: Writer | None) -> None:
     if (opts.with_volume or opts.legacy_mesh) and not (writer and writer.layer):
         flag = "--with-volume" if opts.with_volume else "--legacy-mesh"
         raise IsoconvertError(f"{flag} is an option of --format precomputed")
+
+
+def layer_objects_on(opts: ConvertOptions, source: str):
+    """Where a layer's objects are encoded (``write_precomputed``'s ``map_objects``):
+    with ``--scheduler``, each object is one task of the cluster (its coarser levels
+    decimated and everything Draco-encoded by a worker, the bytes sent back and
+    written here, in order); otherwise None, here."""
+    address = opts.blocks.scheduler
+    if address is None:
+        return None
+    import uuid
+
+    from .runner import Task, run_in_order
+
+    token = uuid.uuid4().hex[:12]
+
+    def on_cluster(function, arguments):
+        tasks = (
+            Task(
+                _object_task,
+                (function, *args),
+                key=f"isoconvert-object-{token}-{n}",
+                what=f"{source}: object {n}",
+                nbytes=int(np.asarray(args[0]).nbytes + np.asarray(args[1]).nbytes),
+            )
+            for n, args in enumerate(arguments, start=1)
+        )
+        return run_in_order(
+            address,
+            tasks,
+            budget=opts.blocks.budget,
+            died=lambda task: (
+                f"{task.what}: a Dask worker died while encoding it (out of memory?), also "
+                "when retried on other workers; nothing was written. Give the workers more memory"
+            ),
+            tail="; nothing was written",
+            memory_hint="Give the workers more memory",
+        )
+
+    return on_cluster
+
+
+def _object_task(function, *args):
+    """A layer's object as a cluster's task: ``function(*args)``, or the
+    ``TaskFailure`` of a user's error (never retried)."""
+    from .runner import TaskFailure
+
+    try:
+        return function(*args)
+    except IsoconvertError as exc:
+        return TaskFailure.of(exc)
 
 
 def bounded_collapse(mesh: Mesh, bound: float) -> Mesh:

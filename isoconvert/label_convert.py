@@ -13,6 +13,7 @@ from .convert import (
     ConvertOptions,
     ConvertResult,
     bounded_collapse,
+    layer_objects_on,
     read_input,
     refuse_layer_options,
     refuse_outputs_read,
@@ -176,6 +177,7 @@ def convert_labels(
             background=opts.background,
             force=opts.force,
             on_status=on_status,
+            map_objects=layer_objects_on(opts, volume.source),
         )
     results = []
     for label, path, mesh in zip(surfaces.labels, outputs, meshes, strict=True):

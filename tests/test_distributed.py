@@ -554,6 +554,52 @@ def test_cli_label_layer_on_a_cluster_is_byte_identical(dask_processes, tmp_path
     assert files["cluster"] == files["memory"]
 
 
+def _encode_and_sign(marker: str, function, *args):
+    """A layer's object task that notes the process it ran in."""
+    from isoconvert.convert import _object_task
+
+    with open(marker, "a") as f:
+        f.write(f"{os.getpid()}\n")
+    return _object_task(function, *args)
+
+
+def _refuse_object(function, *args):
+    raise IsoconvertError("object refused on the worker")
+
+
+def test_layer_objects_are_encoded_by_the_workers(address, monkeypatch, tmp_path):
+    """With a scheduler, each object's levels of detail are decimated and encoded
+    by a worker (not here); the layer is the one written here, byte for byte;
+    an error inside such a task is the run's one-line error, and no layer is left."""
+    pytest.importorskip("DracoPy")
+    pytest.importorskip("meshoptimizer")
+    from isoconvert.label_convert import convert_labels
+
+    convert_module = sys.modules["isoconvert.convert"]  # the package's `convert` is the function
+
+    np.save(tmp_path / "atlas.npy", _atlas())
+    options = {"format": "precomputed", "lods": 2, "force": True}
+    convert_labels(tmp_path / "atlas.npy", tmp_path / "here", **options)
+    marker = tmp_path / "pids"
+    monkeypatch.setattr(
+        convert_module, "_object_task", functools.partial(_encode_and_sign, str(marker))
+    )
+    blocks = Blocks(scheduler=address)
+    convert_labels(tmp_path / "atlas.npy", tmp_path / "there", blocks=blocks, **options)
+    pids = {int(line) for line in marker.read_text().split()}
+    assert len(marker.read_text().split()) == 6  # one task per label
+    assert pids and os.getpid() not in pids
+    for path in (tmp_path / "here").rglob("*"):
+        if path.is_file():
+            twin = tmp_path / "there" / path.relative_to(tmp_path / "here")
+            assert twin.read_bytes() == path.read_bytes()
+    monkeypatch.setattr(convert_module, "_object_task", _refuse_object)
+    with pytest.raises(IsoconvertError, match="^object refused on the worker$"):
+        convert_labels(tmp_path / "atlas.npy", tmp_path / "failed", blocks=blocks, **options)
+    assert not (tmp_path / "failed").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".failed")]
+
+
 # --- workers that die (last: the LocalCluster's nannies restart them) ------------------------
 
 

@@ -54,8 +54,9 @@ Not built yet (issue 25): block-wise and Dask writing.
 
 from __future__ import annotations
 
+import contextlib
 import json
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -75,6 +76,9 @@ QUANTIZATION_BITS = (10, 16)
 
 #: Label types a precomputed segmentation may hold.
 _DATA_TYPES = ("uint8", "uint16", "uint32", "uint64")
+
+#: ``map_objects(function, arguments)``: ``function(*args)`` for each tuple, in order.
+ObjectMap = Callable[[Callable[..., tuple[bytes, bytes]], Iterable[tuple]], Iterable]
 
 
 def not_a_file(mesh: Mesh, fh, ascii: bool) -> None:
@@ -217,6 +221,7 @@ def write_precomputed(
     background: int = 0,
     force: bool = False,
     on_status: Callable[[str], None] | None = None,
+    map_objects: ObjectMap | None = None,
 ) -> Path:
     """Write meshes as one Neuroglancer precomputed segmentation layer.
 
@@ -261,6 +266,11 @@ def write_precomputed(
         Replace an existing folder.
     on_status : callable or None
         Receives notes.
+    map_objects : callable or None
+        ``map_objects(encode_object, arguments)``: ``encode_object(*args)`` for each
+        tuple of ``arguments`` (an iterable), the results in their order; where the
+        objects are encoded (a Dask cluster's workers, say). None: here, objects side
+        by side on threads when there are coarser levels to decimate.
 
     Returns
     -------
@@ -274,7 +284,8 @@ def write_precomputed(
     OutputError
         The folder exists (without ``force``) or cannot be written.
     """
-    draco = None if legacy else _dracopy()
+    if not legacy:
+        _dracopy()  # missing: one line before any work
     if bits not in QUANTIZATION_BITS:
         raise IsoconvertError(f"precomputed: quantization bits must be 10 or 16, got {bits}")
     _check_lods(lods)
@@ -338,17 +349,23 @@ def write_precomputed(
             mesh_info["sharding"] = spec
         _write_json(work / "mesh" / "info", mesh_info)
 
-        def encoded(mesh: Mesh) -> tuple[bytes, bytes]:
-            index = (np.asarray(mesh.vertices, dtype=np.float64) - origin) @ inverse.T
-            full = Mesh(index, np.asarray(mesh.cells, dtype=np.int64))
-            levels = [full] + [decimate(full, float(2 ** (k - 1))) for k in range(1, lods)]
-            return _object(levels, bits, draco, chunk)
-
+        arguments = (
+            (mesh.vertices, mesh.cells, origin, inverse, lods, bits, chunk, decimate)
+            for mesh in meshes.values()
+        )
         objects = {}
-        # objects side by side: the coarser levels' collapses are most of the work,
-        # and their kernels leave the interpreter free
-        with ThreadPoolExecutor(max_workers=kernel_threads() if lods > 1 else 1) as pool:
-            done = pool.map(encoded, meshes.values())
+        with contextlib.ExitStack() as stack:
+            if map_objects is None:
+                # objects side by side: the coarser levels' collapses are most of the
+                # work, and their kernels leave the interpreter free
+                pool = stack.enter_context(
+                    ThreadPoolExecutor(max_workers=kernel_threads() if lods > 1 else 1)
+                )
+                done = pool.map(lambda args: encode_object(*args), arguments)
+            else:
+                done = map_objects(encode_object, arguments)
+                if hasattr(done, "close"):  # stops the work left when this fails
+                    stack.callback(done.close)
             for segment, (manifest, data) in zip(meshes, done, strict=True):
                 if spec is None:
                     (work / "mesh" / f"{int(segment)}.index").write_bytes(manifest)
@@ -358,6 +375,37 @@ def write_precomputed(
         if spec is not None:
             _write_shards(work / "mesh", objects, spec)
     return folder
+
+
+def encode_object(
+    vertices: np.ndarray,
+    cells: np.ndarray,
+    origin: np.ndarray,
+    inverse: np.ndarray,
+    lods: int,
+    bits: int,
+    chunk: float | None,
+    decimate: Callable[[Mesh, float], Mesh] | None,
+) -> tuple[bytes, bytes]:
+    """One object's manifest and fragment data: its levels of detail (the coarser
+    ones by ``decimate``), cut and Draco-encoded (:func:`_object`). A module-level
+    function of arrays and scalars, so that a cluster's worker can run it.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+        World positions.
+    cells : (C, 3) int64
+    origin : (3,) float64
+    inverse : (3, 3) float64
+        The grid's origin and the inverse of its affine: index = inverse @ (world - origin).
+    lods, bits, chunk, decimate
+        As :func:`write_precomputed`.
+    """
+    index = (np.asarray(vertices, dtype=np.float64) - origin) @ inverse.T
+    full = Mesh(index, np.asarray(cells, dtype=np.int64))
+    levels = [full] + [decimate(full, float(2 ** (k - 1))) for k in range(1, lods)]
+    return _object(levels, bits, _dracopy(), chunk)
 
 
 def _axis_aligned_at_zero(grid: dict) -> bool:
@@ -539,15 +587,23 @@ def _object(
                     vertices = vertices.copy()
                     vertices[near, axis] = plane
                 vertices, cells = _cut(vertices, cells, axis, plane)
-        centroid = vertices[cells].mean(axis=1)
-        where = np.floor((centroid - grid_origin) / node).astype(np.int64)
-        where = np.maximum(where, 0)
-        order = np.lexsort(where.T[::-1])
-        where, cells = where[order], cells[order]
-        starts = np.flatnonzero(np.r_[True, (where[1:] != where[:-1]).any(axis=1)])
+        if cut:
+            centroid = vertices[cells].mean(axis=1)
+            where = np.floor((centroid - grid_origin) / node).astype(np.int64)
+            where = np.maximum(where, 0)
+            order = np.lexsort(where.T[::-1])
+            where, cells = where[order], cells[order]
+            starts = np.flatnonzero(np.r_[True, (where[1:] != where[:-1]).any(axis=1)])
+        else:  # the level lies in the first node (its box is the object's): one fragment
+            where, starts = np.zeros((1, 3), np.int64), np.zeros(1, np.int64)
         level = {}
         for a, b in zip(starts, np.r_[starts[1:], len(cells)], strict=True):
-            used, local = np.unique(cells[a:b], return_inverse=True)
+            if not cut and np.bincount(cells.reshape(-1), minlength=len(vertices)).all():
+                # every vertex used (as extracted and decimated meshes are): what
+                # np.unique would give, without sorting 3C indices
+                used, local = np.arange(len(vertices)), cells
+            else:
+                used, local = np.unique(cells[a:b], return_inverse=True)
             origin = grid_origin + where[a] * node
             q = np.clip(np.rint((vertices[used] - origin) / node * top), 0, top)
             local = local.reshape(-1, 3)
