@@ -377,9 +377,18 @@ def _convert_levels_to_layer(
 def refuse_layer_options(opts: ConvertOptions, writer: Writer | None) -> None:
     """Refuse the flags only a precomputed layer takes when ``writer`` writes none
     (None: the format comes from the output's name, which is no layer's)."""
-    if (opts.with_volume or opts.legacy_mesh) and not (writer and writer.layer):
-        flag = "--with-volume" if opts.with_volume else "--legacy-mesh"
-        raise IsoconvertError(f"{flag} is an option of --format precomputed")
+    if writer and writer.layer:
+        return
+    given = {
+        "--with-volume": opts.with_volume,
+        "--legacy-mesh": opts.legacy_mesh,
+        "--lods": opts.lods is not None,
+        "--fragment-size": opts.fragment_size is not None,
+        "--sharded": opts.sharded,
+    }
+    for flag, on in given.items():
+        if on:  # said, not silently ignored
+            raise IsoconvertError(f"{flag} is an option of --format precomputed")
 
 
 def layer_objects_on(opts: ConvertOptions, source: str):

@@ -307,6 +307,9 @@ def test_the_command_writes_a_layer_with_voxels_and_legacy_meshes(tmp_path):
         (["--format", "precomputed", "--legacy-mesh", "--fragment-size", "16"], "one fragment"),
         (["--with-volume"], "--with-volume is an option of --format precomputed"),
         (["--legacy-mesh"], "--legacy-mesh is an option of --format precomputed"),
+        (["--lods", "2"], "--lods is an option of --format precomputed"),
+        (["--fragment-size", "32"], "--fragment-size is an option of --format precomputed"),
+        (["--sharded"], "--sharded is an option of --format precomputed"),
     ],
 )
 def test_options_the_layer_cannot_hold_are_one_line_errors(tmp_path, extra, message):

@@ -97,10 +97,21 @@ def test_the_command_writes_a_legacy_level_layer(tmp_path):
     assert trimesh.Trimesh(back.vertices, back.faces).is_watertight
 
 
-@pytest.mark.parametrize("flag", ["--with-volume", "--legacy-mesh"])
-def test_layer_flags_without_a_layer_are_one_line_errors(tmp_path, flag):
+@pytest.mark.parametrize(
+    "flags",
+    [
+        ["--with-volume"],
+        ["--legacy-mesh"],
+        ["--lods", "2"],
+        ["--fragment-size", "8"],
+        ["--sharded"],
+    ],
+)
+def test_layer_flags_without_a_layer_are_one_line_errors(tmp_path, flags):
     _nested_balls(tmp_path / "field.npy")
-    done = _isoconvert("convert", "field.npy", "--level", "60.5", flag, "-o", "f.ply", cwd=tmp_path)
+    done = _isoconvert(
+        "convert", "field.npy", "--level", "60.5", *flags, "-o", "f.ply", cwd=tmp_path
+    )
     assert done.returncode != 0 and "Traceback" not in done.stderr
-    assert f"{flag} is an option of --format precomputed" in done.stderr
+    assert f"{flags[0]} is an option of --format precomputed" in done.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["field.npy"]
