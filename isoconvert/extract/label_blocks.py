@@ -52,6 +52,7 @@ from ..runner.local import read_ahead
 from ..threads import kernel_threads
 from ..volume import Volume
 from .blocks import Blocks, dask_runner, read_block, slab_ranges
+from .label_samples import fit_background, kernel_labels
 from .prepare import kernel_type
 
 #: Layers of halo beyond the smoothing iterations: one for the dual cells at a
@@ -282,9 +283,7 @@ def run_label_slab(job: LabelSlabJob, zyx: np.ndarray) -> LabelSlab:
     VolumeError
         Samples that are not whole numbers.
     """
-    from .labels import _fit_background, _kernel_labels
-
-    samples = kernel_type(_kernel_labels(zyx, job.source), job.source)
+    samples = kernel_type(kernel_labels(zyx), job.source)
     vmin, vmax, bad, present = _native.label_presence(samples, job.threads)
     if bad:
         raise VolumeError(
@@ -296,7 +295,7 @@ def run_label_slab(job: LabelSlabJob, zyx: np.ndarray) -> LabelSlab:
     wanted = present[present != job.background] if job.wanted is None else job.wanted
     if not len(wanted):
         return _empty_slab(vmin, vmax, present)
-    samples = _fit_background(samples, job.background)
+    samples = fit_background(samples, job.background)
     positions, dual, sheets, corners, pairs, _, split, unresolved, outside = _native.label_net(
         samples,
         wanted,

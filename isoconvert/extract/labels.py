@@ -95,6 +95,7 @@ from ..threads import kernel_threads
 from ..volume import Volume
 from .blocks import Blocks
 from .label_blocks import MergedNet, merge_slabs, run_slabs, slab_jobs, wants_blocks
+from .label_samples import fit_background, kernel_labels
 from .placement import mesh_info, reversed_orientation
 from .prepare import kernel_type
 
@@ -250,7 +251,7 @@ def label_surfaces(
     threads = kernel_threads()
     # a left-handed index-to-world map mirrors the surface: the kernel writes every quad reversed
     reverse = reversed_orientation(volume, False)
-    itemsize = kernel_type(_kernel_labels(np.zeros(1, volume.dtype), volume.source), "").itemsize
+    itemsize = kernel_type(kernel_labels(np.zeros(1, volume.dtype)), "").itemsize
     if wants_blocks(volume, blocks, itemsize):
         net = _net_in_slabs(volume, labels, background, options, reverse, blocks, itemsize,
                             on_status)  # fmt: skip
@@ -263,7 +264,7 @@ def label_surfaces(
         samples = _label_samples(volume)
         vmin, vmax, present = _present_labels(samples, volume.source, threads)
         wanted, _ = _wanted_labels(present, labels, background, volume.source)
-        samples = _fit_background(samples, background)
+        samples = fit_background(samples, background)
         positions, dual_cells, _, corners, pairs, sides, split, unresolved, outside = (
             _native.label_net(
                 samples,
@@ -378,22 +379,7 @@ def _label_samples(volume: Volume) -> np.ndarray:
     """The samples of a label volume as the kernels take them: (Z, Y, X), C-contiguous,
     one of the kernels' types (a view when they already are)."""
     _check_3d(volume)
-    return kernel_type(_kernel_labels(volume.data, volume.source).T, volume.source)
-
-
-def _kernel_labels(data: np.ndarray, source: str) -> np.ndarray:
-    """Label samples in a type :func:`kernel_type` takes, exactly (any axis order). Float
-    samples are compared as they are (exact for whole numbers, which the label
-    scan checks)."""
-    if data.dtype != bool and not np.issubdtype(data.dtype, np.integer):
-        if data.dtype.itemsize < 4:  # float16: no kernel of its own, exact in float32
-            data = data.astype(np.float32)
-    if np.issubdtype(data.dtype, np.integer) and data.dtype.itemsize == 8 and data.size:
-        # 64-bit labels: as int32 when they fit (exact, half the memory), else float64
-        lo, hi = int(data.min()), int(data.max())
-        if -(2**31) <= lo and hi < 2**31:
-            data = data.astype(np.int32)
-    return data
+    return kernel_type(kernel_labels(volume.data).T, volume.source)
 
 
 def _present_labels(
@@ -410,24 +396,6 @@ def _present_labels(
     if present is None:
         present = np.unique(samples)
     return float(vmin), float(vmax), np.asarray(present).astype(np.int64)
-
-
-def _fit_background(samples: np.ndarray, background: int) -> np.ndarray:
-    """The samples in a type that holds ``background`` (the value around the grid):
-    a copy in a wider type in the rare case theirs does not."""
-    dtype = samples.dtype
-    if np.issubdtype(dtype, np.integer):
-        info = np.iinfo(dtype)
-        if info.min <= background <= info.max:
-            return samples
-        wide = np.int32 if -(2**31) <= background < 2**31 and dtype.itemsize < 4 else np.float64
-    else:
-        if float(dtype.type(background)) == background:
-            return samples
-        wide = np.float64
-    if wide == np.float64 and abs(background) > 2**53:
-        raise VolumeError(f"background {background} is beyond +-2**53, which labels cannot be")
-    return samples.astype(wide)
 
 
 def _whole(value: object, name: str, source: str) -> int:

@@ -49,7 +49,9 @@ meshes then go to that same frame (index coordinates plus half a voxel, times th
 resolution), so that each surface lies on its voxels in the viewer; the volume's
 origin and direction are not stored (a note says so where they are not trivial).
 
-Not built yet (issue 25): block-wise and Dask writing.
+Each object is encoded by :func:`encode_object`, a function of arrays and scalars,
+which the caller may run elsewhere (``map_objects``: the jobs send each object to a
+Dask cluster's workers with ``--scheduler``); the bytes are written here.
 """
 
 from __future__ import annotations
