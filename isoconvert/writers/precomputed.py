@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -320,8 +321,6 @@ def write_precomputed(
     inverse = np.linalg.inv(np.asarray(clean["affine"], dtype=np.float64))
     origin = np.asarray(clean["origin"], dtype=np.float64)
 
-    for segment, mesh in meshes.items():
-        _check_mesh(int(segment), mesh)
     if volume is not None and data_type not in ("uint32", "uint64"):
         raise IsoconvertError(
             f"precomputed: compressed_segmentation voxels are uint32 or uint64, not {data_type}"
@@ -338,6 +337,7 @@ def write_precomputed(
         if legacy:
             _write_json(work / "mesh" / "info", {"@type": "neuroglancer_legacy_mesh"})
             for segment, mesh in meshes.items():
+                _check_mesh(int(segment), mesh)
                 _write_legacy(work / "mesh", int(segment), mesh, origin, inverse, transform)
             return folder
         mesh_info = {
@@ -351,21 +351,23 @@ def write_precomputed(
             mesh_info["sharding"] = spec
         _write_json(work / "mesh" / "info", mesh_info)
 
-        arguments = (
-            (mesh.vertices, mesh.cells, origin, inverse, lods, bits, chunk, decimate)
-            for mesh in meshes.values()
-        )
+        def arguments():
+            # one object at a time: a mapping that builds each mesh when asked for
+            # (label surfaces) holds only the few in flight
+            for segment, mesh in meshes.items():
+                _check_mesh(int(segment), mesh)
+                yield (mesh.vertices, mesh.cells, origin, inverse, lods, bits, chunk, decimate)
+
         objects = {}
         with contextlib.ExitStack() as stack:
             if map_objects is None:
                 # objects side by side: the coarser levels' collapses are most of the
                 # work, and their kernels leave the interpreter free
-                pool = stack.enter_context(
-                    ThreadPoolExecutor(max_workers=kernel_threads() if lods > 1 else 1)
-                )
-                done = pool.map(lambda args: encode_object(*args), arguments)
+                threads = kernel_threads() if lods > 1 else 1
+                pool = stack.enter_context(ThreadPoolExecutor(max_workers=threads))
+                done = _in_order(pool, encode_object, arguments(), 2 * threads)
             else:
-                done = map_objects(encode_object, arguments)
+                done = map_objects(encode_object, arguments())
                 if hasattr(done, "close"):  # stops the work left when this fails
                     stack.callback(done.close)
             for segment, (manifest, data) in zip(meshes, done, strict=True):
@@ -377,6 +379,22 @@ def write_precomputed(
         if spec is not None:
             _write_shards(work / "mesh", objects, spec)
     return folder
+
+
+def _in_order(pool: ThreadPoolExecutor, function, arguments, window: int):
+    """``function(*args)`` for each of ``arguments`` on ``pool``, in order, with at
+    most ``window`` submitted at once (``Executor.map`` takes every argument first)."""
+    pending: deque = deque()
+    try:
+        for args in arguments:
+            pending.append(pool.submit(function, *args))
+            if len(pending) >= window:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
+    finally:
+        for future in pending:
+            future.cancel()
 
 
 def encode_object(
