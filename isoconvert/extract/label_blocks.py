@@ -410,10 +410,11 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
             shared = slab.corners < 0
             corners[shared] = (starts[n + 1] + after.first_index[at])[-1 - slab.corners[shared]]
         refs.append(corners)
-    order = np.argsort(np.concatenate([s.quad_keys for s in slabs]), kind="stable")
+        slab.corners = None  # each slab's arrays go once merged: the peak holds one copy
+    order = np.argsort(_take(slabs, "quad_keys"), kind="stable")
     refs = np.concatenate(refs)[order]
-    turned = np.concatenate([s.turned for s in slabs])[order]
-    pairs = np.concatenate([s.pairs for s in slabs])[order]
+    turned = _take(slabs, "turned")[order]
+    pairs = _take(slabs, "pairs")[order]
     # vertices numbered by their first quad corner, quads not yet turned
     nv = int(starts[-1])
     rank = _native.first_use_numbering(refs.reshape(-1), nv)
@@ -422,9 +423,9 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
     corners = rank[refs]
     corners[turned] = corners[turned, ::-1]
     positions = np.empty((nv, 3))
-    positions[rank] = np.concatenate([s.positions for s in slabs])
+    positions[rank] = _take(slabs, "positions")
     dual_cells = np.empty(nv, np.int64)
-    dual_cells[rank] = np.concatenate([s.vertex_keys for s in slabs]) >> SHEET_BITS
+    dual_cells[rank] = _take(slabs, "vertex_keys") >> SHEET_BITS
     sides = np.searchsorted(wanted, pairs).astype(np.int32)
     found = sides < len(wanted)
     found[found] = wanted[sides[found]] == pairs[found]
@@ -444,6 +445,14 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
         present=present,
         wanted=wanted,
     )
+
+
+def _take(slabs: list[LabelSlab], name: str) -> np.ndarray:
+    """The slabs' arrays ``name`` end to end; the slabs let go of theirs."""
+    whole = np.concatenate([getattr(s, name) for s in slabs])
+    for slab in slabs:
+        setattr(slab, name, None)
+    return whole
 
 
 def run_slabs(volume: Volume, jobs: list[LabelSlabJob], scheduler: str | None, budget: int):
