@@ -51,7 +51,10 @@ from ..runner import TaskFailure, cluster_size, worker_threads
 from ..runner.local import read_ahead
 from ..threads import kernel_threads
 from ..volume import Volume
-from .blocks import Blocks, dask_runner, read_block, slab_ranges
+
+# slabs per cluster thread, and copies of a slab's samples alive at once (the one
+# being meshed, its kernel-type copy, the next one read): as for isosurfaces
+from .blocks import _SLAB_COPIES, _SLABS_PER_THREAD, Blocks, dask_runner, read_block, slab_ranges
 from .label_samples import fit_background, kernel_labels
 from .prepare import kernel_type
 
@@ -62,13 +65,6 @@ HALO_MARGIN = 8
 
 #: Bits of a vertex key taken by the sheet (a dual cell has at most 12 sheets).
 SHEET_BITS = 4
-
-#: Slabs per thread of a Dask cluster, when the budget would make fewer.
-_SLABS_PER_THREAD = 4
-
-#: Copies of a slab's samples alive at once: the one being meshed, its kernel-type
-#: copy, and the next one being read.
-_SLAB_COPIES = 3
 
 
 def halo_layers(iterations: int) -> int:

@@ -332,9 +332,10 @@ def _net_in_slabs(
     """The net of ``volume`` built slab by slab (see :mod:`.label_blocks`), with the
     labels checked against every slab's once all are seen."""
     asked = None
-    if labels is not None:  # checked for form now, against the volume at the end
+    if labels is not None:  # checked now but for presence, which the slabs tell
         asked = np.unique(np.array([_whole(v, "--label", volume.source) for v in labels],
                                    dtype=np.int64))  # fmt: skip
+        _wanted_labels(asked, labels, background, volume.source)
     jobs = slab_jobs(volume, asked, background, options.iterations, options.relaxation,
                      options.constraint, reverse, blocks, itemsize, on_status)  # fmt: skip
     slabs = []
