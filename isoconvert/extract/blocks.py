@@ -985,7 +985,8 @@ def extract_blocks(
 
 
 def extract_slab(job: BlockJob, samples: np.ndarray | LazyGrid) -> BlockResult | TaskFailure:
-    """One slab, as a task of a cluster: read it (unless sent), extract it.
+    """One slab, as a task of a cluster: read it (unless sent), extract it
+    (:func:`slab_task` of :func:`run_block`).
 
     Parameters
     ----------
@@ -1001,6 +1002,13 @@ def extract_slab(job: BlockJob, samples: np.ndarray | LazyGrid) -> BlockResult |
     BlockResult or TaskFailure
         The result with its arrays; a failure for an ``IsoconvertError``.
     """
+    return slab_task(run_block, job, samples)
+
+
+def slab_task(run: Callable[[Any, np.ndarray], Any], job: Any, samples: np.ndarray | LazyGrid):
+    """``run(job, zyx)`` on a worker: the slab's samples read from the grid there
+    (``job.read_range``) unless they were sent, the worker's own thread count, and
+    an ``IsoconvertError`` returned as a :class:`~isoconvert.runner.TaskFailure`."""
     try:
         job = replace(job, threads=worker_threads())
         if isinstance(samples, LazyGrid):
@@ -1010,7 +1018,7 @@ def extract_slab(job: BlockJob, samples: np.ndarray | LazyGrid) -> BlockResult |
                 raise IsoconvertError(_unreadable(samples, job, exc)) from None
         else:
             zyx = samples
-        return run_block(job, zyx)
+        return run(job, zyx)
     except IsoconvertError as exc:
         return TaskFailure.of(exc)
 
@@ -1209,5 +1217,6 @@ __all__ = [
     "run_block",
     "run_local",
     "slab_ranges",
+    "slab_task",
     "stitch_blocks",
 ]

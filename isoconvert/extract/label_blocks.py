@@ -40,21 +40,21 @@ never the volume.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from .. import _native
 from ..errors import IsoconvertError, VolumeError
-from ..grid import LazyGrid, SlabReader
-from ..runner import TaskFailure, cluster_size, worker_threads
+from ..grid import SlabReader
+from ..runner import TaskFailure, cluster_size
 from ..runner.local import read_ahead
 from ..threads import kernel_threads
 from ..volume import Volume
 
 # slabs per cluster thread, and copies of a slab's samples alive at once (the one
 # being meshed, its kernel-type copy, the next one read): as for isosurfaces
-from .blocks import _SLAB_COPIES, _SLABS_PER_THREAD, Blocks, dask_runner, read_block, slab_ranges
+from .blocks import _SLAB_COPIES, _SLABS_PER_THREAD, Blocks, dask_runner, slab_ranges, slab_task
 from .label_samples import fit_background, kernel_labels
 from .prepare import kernel_type
 
@@ -472,7 +472,8 @@ def _run_here(source, jobs: list[LabelSlabJob]) -> Iterator[LabelSlab]:
 
 
 def label_slab_task(job: LabelSlabJob, samples) -> LabelSlab | TaskFailure:
-    """One slab as a task of a cluster: read it (unless sent), build it.
+    """One slab as a task of a cluster: read it (unless sent), build it
+    (:func:`~isoconvert.extract.blocks.slab_task` of :func:`run_label_slab`).
 
     Parameters
     ----------
@@ -481,18 +482,7 @@ def label_slab_task(job: LabelSlabJob, samples) -> LabelSlab | TaskFailure:
     samples : LazyGrid or (z1 - z0, Y, X) array
         The grid to read the slab from, or the slab itself.
     """
-    from .blocks import _unreadable
-
-    try:
-        job = replace(job, threads=worker_threads())
-        if isinstance(samples, LazyGrid):
-            try:
-                samples = read_block(samples, job)
-            except OSError as exc:
-                raise IsoconvertError(_unreadable(samples, job, exc)) from None
-        return run_label_slab(job, samples)
-    except IsoconvertError as exc:
-        return TaskFailure.of(exc)
+    return slab_task(run_label_slab, job, samples)
 
 
 __all__ = [
