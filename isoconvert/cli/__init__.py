@@ -49,6 +49,7 @@ from .options import (
     PostArgs,
     ReadArgs,
     _flag,
+    with_method_names,
 )
 
 __all__ = [
@@ -91,6 +92,10 @@ class _Command(_HelpAsFlag, typer.core.TyperCommand):
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         plain_coercion(self.params)  # option values without pydantic (0.1 s a run)
+
+    def format_help(self, ctx, formatter) -> None:
+        with_method_names(self.params)  # the plugins are looked up for a help only
+        super().format_help(ctx, formatter)
 
 
 class _Group(_HelpAsFlag, typer.core.TyperGroup):
