@@ -38,6 +38,9 @@ def run() -> None:
     """Console-script entry point: ``isoconvert ARGS``."""
     before = _quiet_start()
     from .cli import main
+    from .memory import keep_freed_memory
+
+    keep_freed_memory()  # a command's process: freed arrays' pages are reused, not refaulted
 
     # the command line's own handling takes over from here (isoconvert.signals
     # installs it only over Python's defaults)

@@ -334,4 +334,7 @@ def _is_usage_error(exc: Exception) -> bool:
 
 def run() -> None:
     """Console-script entry point."""
+    from ..memory import keep_freed_memory
+
+    keep_freed_memory()
     sys.exit(main())

@@ -2,6 +2,8 @@
 
 import sys
 
+from ..memory import keep_freed_memory
 from . import main
 
+keep_freed_memory()
 sys.exit(main())
