@@ -545,15 +545,18 @@ class Net {
     Vec<i64> cell_of(static_cast<size_t>(nv));
     Vec<u8> sheet_of(static_cast<size_t>(nv));
     Vec<u8> junction(static_cast<size_t>(nv));
-    Vec<i64> nb(static_cast<size_t>(ne));
-    Vec<i64> nboff(static_cast<size_t>(nv + 1));
+    // the smoothing stencil, only for smoothing (unsmoothed: 40 bytes a vertex less)
+    const bool stencil = o_.iterations > 0;
+    Vec<i64> nb(static_cast<size_t>(stencil ? ne : 0));
+    Vec<i64> nboff(static_cast<size_t>(stencil ? nv + 1 : 0));
     iso::parallel_for(i64(chunks_.size()), o_.threads, 1, [&](int, i64 b, i64 e) {
       for (i64 c = b; c < e; ++c) {
         fill(chunks_[size_t(c)], corners.data(), flip.data(), out.pairs.data(), out.sides.data(),
-             cell_of.data(), sheet_of.data(), junction.data(), nb.data(), nboff.data());
+             cell_of.data(), sheet_of.data(), junction.data(), stencil ? nb.data() : nullptr,
+             stencil ? nboff.data() : nullptr);
       }
     });
-    nboff[size_t(nv)] = ne;
+    if (stencil) nboff[size_t(nv)] = ne;
     Vec<double> pos = smooth(cell_of, junction, nb, nboff, split_cells);
     // copies that still coincide (none seen in tests): the note counts them
     const i64 layer = (X_ + 1) * (Y_ + 1);
@@ -893,7 +896,7 @@ class Net {
             cell_of[c->first + s] = id;
             sheet_of[c->first + s] = u8(s);
             junction[c->first + s] = u8((c->junction >> s) & 1);
-            nboff[c->first + s] = c->nbfirst + e;
+            if (nboff) nboff[c->first + s] = c->nbfirst + e;
             write[s] = c->nbfirst + e;
             e += (c->nbcount >> (4 * s)) & 15;
           }
@@ -901,7 +904,7 @@ class Net {
           // the cells below along z, y, x: the order np.bincount summed them in
           const Cell *up[3] = {next_x, ny_, nz_};
           const Cell *down[3] = {prev_x, py_, pz_};
-          for (int k = 0; k < 6; ++k) {
+          for (int k = 0; nb && k < 6; ++k) {  // nb null: no stencil (no smoothing)
             const int b = k < 3 ? k : 5 - k;
             const int d = k < 3 ? 2 * b + 1 : 2 * b, other = k < 3 ? 2 * b : 2 * b + 1;
             const Cell *n = k < 3 ? up[b] : down[b];
@@ -1000,13 +1003,15 @@ class Net {
                      const Vec<i64> &nboff, const std::vector<const Cell *> &split_cells) {
     const i64 nv = i64(cell_of.size());
     const i64 cx = X_ + 1, cy = Y_ + 1;
-    Vec<double> pos(static_cast<size_t>(3 * nv)), centers(size_t(3 * nv));
+    // the centres (the boxes of the constraint) only for smoothing
+    Vec<double> pos(static_cast<size_t>(3 * nv)), centers(size_t(o_.iterations ? 3 * nv : 0));
+    double *box = o_.iterations ? centers.data() : pos.data();
     iso::parallel_for(nv, o_.threads, 1 << 15, [&](int, i64 b, i64 e) {
       for (i64 p = b; p < e; ++p) {
         const i64 id = cell_of[size_t(p)];
         const i64 c[3] = {id % cx, (id / cx) % cy, id / (cx * cy) + o_.z_offset};
         for (int k = 0; k < 3; ++k) {
-          centers[size_t(3 * p + k)] = pos[size_t(3 * p + k)] = double(c[k]) - 0.5;
+          box[3 * p + k] = pos[size_t(3 * p + k)] = double(c[k]) - 0.5;
         }
       }
     });

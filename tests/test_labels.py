@@ -332,10 +332,13 @@ def test_per_label_mappings_are_built_once_on_access():
         for missing in (4, 0, -1, "5", 5.5, True):
             with pytest.raises(KeyError):
                 mapping[missing]
-    assert not result._parts  # nothing built until asked for
+    assert not result._meshes and not result._maps  # nothing built until asked for
     mesh = result.meshes[np.int64(7)]
-    assert mesh is result[7] is result.meshes[7] and list(result._parts) == [7]
-    assert result.vertex_map[7] is result.vertex_map[7]
+    assert mesh is result[7] is result.meshes[7] and list(result._meshes) == [7]
+    assert not result._maps  # the maps only when asked for
+    assert result.vertex_map[7] is result.vertex_map[7] and list(result._maps) == [7]
+    assert result[7] is mesh  # the same mesh, kept
+    assert result.face_map[5] is result.face_map[5] and list(result._meshes) == [7, 5]
     assert set(dict(result.meshes)) == {3, 5, 7, 9}
     assert [m.info["label"] for m in result.meshes.values()] == [3, 5, 7, 9]
     # each label's info is its own (no dict shared between labels)

@@ -194,7 +194,8 @@ class LabelMeshes:
         value_range: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         self._net = net
-        self._parts: dict[int, tuple[Mesh, np.ndarray, np.ndarray]] = {}
+        self._meshes: dict[int, Mesh] = {}
+        self._maps: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._combined: Mesh | None = None
         self.boundary_labels = boundary_labels
         self.dual_cells = dual_cells
@@ -228,22 +229,35 @@ class LabelMeshes:
     def __len__(self) -> int:
         return len(self._net.index)
 
-    def _part(self, label: int) -> tuple[Mesh, np.ndarray, np.ndarray]:
-        """(mesh, vertex map, face map) of ``label``, built on first use."""
-        part = self._parts.get(label)
-        if part is None:
-            net = self._net
-            n = net.index[label]  # KeyError for a label not extracted
-            q0, q1 = net.offsets[n], net.offsets[n + 1]
-            faces, used, local, verts = _native.label_mesh(
-                net.corners, net.cut, net.vertices, net.quads[q0:q1], int(net.inside[n])
-            )
-            info = copy.deepcopy(net.label_info)
-            info["level"] = float(label)
-            info["label"] = int(label)
-            info["smoothing"] = dict(net.info["smoothing"])
-            part = self._parts.setdefault(label, (Mesh(verts, local, None, info), used, faces))
-        return part
+    def _part(self, label: int, which: int) -> Mesh | np.ndarray:
+        """The mesh (0), vertex map (1) or face map (2) of ``label``, built on first
+        use. The maps are kept only once asked for: writing every label's mesh
+        needs neither (a quarter of the memory of the meshes)."""
+        if which == 0:
+            mesh = self._meshes.get(label)
+            if mesh is None:
+                mesh = self._meshes.setdefault(label, self._build(label)[0])
+            return mesh
+        maps = self._maps.get(label)
+        if maps is None:
+            mesh, *built = self._build(label)
+            self._meshes.setdefault(label, mesh)
+            maps = self._maps.setdefault(label, tuple(built))
+        return maps[which - 1]
+
+    def _build(self, label: int) -> tuple[Mesh, np.ndarray, np.ndarray]:
+        """(mesh, vertex map, face map) of ``label``, anew."""
+        net = self._net
+        n = net.index[label]  # KeyError for a label not extracted
+        q0, q1 = net.offsets[n], net.offsets[n + 1]
+        faces, used, local, verts = _native.label_mesh(
+            net.corners, net.cut, net.vertices, net.quads[q0:q1], int(net.inside[n])
+        )
+        info = copy.deepcopy(net.label_info)
+        info["level"] = float(label)
+        info["label"] = int(label)
+        info["smoothing"] = dict(net.info["smoothing"])
+        return Mesh(verts, local, None, info), used, faces
 
 
 @dataclass(frozen=True)
@@ -270,7 +284,7 @@ class _PerLabel(Mapping):
     def __getitem__(self, label: int):
         if isinstance(label, (bool, np.bool_)) or not isinstance(label, (int, np.integer)):
             raise KeyError(label)
-        return self._owner._part(int(label))[self._which]
+        return self._owner._part(int(label), self._which)
 
     def __iter__(self):
         return iter(self._owner.labels)
