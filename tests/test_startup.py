@@ -229,3 +229,32 @@ def test_the_command_keeps_freed_memory_for_its_next_arrays():
         pytest.skip("not glibc: mallopt is not there")
     assert int(out["keep"][1]) >= 12  # kept
     assert out["default"][0] == "None" and int(out["default"][1]) < 4  # given back
+
+
+BLAS = """
+import os, sys
+if sys.argv[1] == "prepared":
+    from isoconvert.entry import prepare_process
+    prepare_process()
+import numpy
+print(os.environ.get("OPENBLAS_NUM_THREADS"), len(os.listdir("/proc/self/task")))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc/self/task")
+def test_the_command_process_gives_numpy_blas_one_thread(monkeypatch):
+    """prepare_process (the isoconvert command's start): OpenBLAS starts no threads of
+    its own to spin against the kernels', unless the user asked for some."""
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+
+    def run(mode):
+        proc = subprocess.run([sys.executable, "-c", BLAS, mode], capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr
+        setting, threads = proc.stdout.split()
+        return setting, int(threads)
+
+    assert run("prepared") == ("1", 1)
+    setting, threads = run("plain")
+    assert setting == "None"
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")  # the user's own setting is kept
+    assert run("prepared")[0] == "2"

@@ -334,7 +334,7 @@ def _is_usage_error(exc: Exception) -> bool:
 
 def run() -> None:
     """Console-script entry point."""
-    from ..memory import keep_freed_memory
+    from ..entry import prepare_process
 
-    keep_freed_memory()
+    prepare_process()
     sys.exit(main())

@@ -2,8 +2,8 @@
 
 import sys
 
-from ..memory import keep_freed_memory
+from ..entry import prepare_process
 from . import main
 
-keep_freed_memory()
+prepare_process()
 sys.exit(main())
