@@ -34,28 +34,11 @@ def _quiet_start() -> dict:
     return before
 
 
-def prepare_process() -> None:
-    """Settings for a process that runs one command and exits, before numpy is imported:
-
-    - freed memory is kept for the next arrays (:func:`isoconvert.memory.keep_freed_memory`);
-    - numpy's OpenBLAS gets one thread (unless ``OPENBLAS_NUM_THREADS`` says otherwise):
-      isoconvert does no large matrix products, but after any small one (a 3x3
-      determinant) OpenBLAS's threads spin for a while, on every core, against the
-      kernels' own threads (about 0.1 s of CPU in a labels run on two cores). Processes
-      the command starts (batch's workers) inherit it.
-    """
-    import os
-
-    from .memory import keep_freed_memory
-
-    keep_freed_memory()
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-
 def run() -> None:
     """Console-script entry point: ``isoconvert ARGS``."""
     before = _quiet_start()
     from .cli import main
+    from .threads import prepare_process
 
     prepare_process()
 

@@ -234,7 +234,7 @@ def test_the_command_keeps_freed_memory_for_its_next_arrays():
 BLAS = """
 import os, sys
 if sys.argv[1] == "prepared":
-    from isoconvert.entry import prepare_process
+    from isoconvert.threads import prepare_process
     prepare_process()
 import numpy
 print(os.environ.get("OPENBLAS_NUM_THREADS"), len(os.listdir("/proc/self/task")))

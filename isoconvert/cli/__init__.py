@@ -334,7 +334,7 @@ def _is_usage_error(exc: Exception) -> bool:
 
 def run() -> None:
     """Console-script entry point."""
-    from ..entry import prepare_process
+    from ..threads import prepare_process
 
     prepare_process()
     sys.exit(main())

@@ -2,7 +2,7 @@
 
 import sys
 
-from ..entry import prepare_process
+from ..threads import prepare_process
 from . import main
 
 prepare_process()
