@@ -105,8 +105,12 @@ def ours_runner(volume, iterations: int):
     def run() -> tuple[float, int]:
         start = time.perf_counter()
         result = label_surfaces(volume, smoothing=iterations)
+        # the combined mesh and every label's are built on first access: timed too
+        cells = result.combined.n_cells
+        for label in result.labels:
+            result[label]
         seconds = time.perf_counter() - start
-        return seconds, result.combined.n_cells
+        return seconds, cells
 
     return run
 

@@ -6,6 +6,8 @@ importing :mod:`isoconvert.report` (and numpy), which runs the checks.
 
 from __future__ import annotations
 
+from .errors import IsoconvertError
+
 #: Checks on triangle meshes, for ``--require``.
 TRIANGLE_CHECKS = {
     "watertight": "every edge in exactly two triangles",
@@ -28,4 +30,19 @@ SEGMENT_CHECKS = {
 }
 CHECK_NAMES = tuple(TRIANGLE_CHECKS)
 
-__all__ = ["CHECK_NAMES", "SEGMENT_CHECKS", "TRIANGLE_CHECKS"]
+
+def parse_requirements(text: str | None) -> list[str]:
+    """``"watertight,manifold"`` -> names; the error lists the known names."""
+    if not text:
+        return []
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in CHECK_NAMES]
+    if unknown:
+        raise IsoconvertError(
+            f"unknown check {', '.join(map(repr, unknown))} for --require; "
+            f"choose from: {', '.join(CHECK_NAMES)}"
+        )
+    return names
+
+
+__all__ = ["CHECK_NAMES", "SEGMENT_CHECKS", "TRIANGLE_CHECKS", "parse_requirements"]

@@ -38,6 +38,9 @@ def run() -> None:
     """Console-script entry point: ``isoconvert ARGS``."""
     before = _quiet_start()
     from .cli import main
+    from .threads import prepare_process
+
+    prepare_process()
 
     # the command line's own handling takes over from here (isoconvert.signals
     # installs it only over Python's defaults)

@@ -144,7 +144,9 @@ def convert_labels(
     else:
         for path in outputs:  # every name is checked before the first file is written
             check_output(path, opts.force, inputs=volume.files)
-    meshes = [surfaces[label] for label in surfaces.labels]
+    # each label's surface is built when it is written (or post-processed): the
+    # memory of the ones written is reused for the next
+    meshes = list(surfaces.meshes.values()) if post.steps or writer.layer else None
     if post.steps:
         progress("post-processing")
         # every label before the first file: a step emptying one label's surface
@@ -158,7 +160,7 @@ def convert_labels(
                 raise EmptyMeshError(f"{volume.source}: label {label}: {text}") from None
     if writer.layer:
         progress("writing")
-        grid = surfaces.combined.info["grid"]
+        grid = meshes[0].info["grid"]  # the grid the net was extracted on
         largest = max(surfaces.labels)
         if opts.with_volume:  # every label of the volume is stored, not only those meshed
             largest = max(largest, int(surfaces.value_range[1]))
@@ -180,8 +182,9 @@ def convert_labels(
             map_objects=layer_objects_on(opts, volume.source),
         )
     results = []
-    for label, path, mesh in zip(surfaces.labels, outputs, meshes, strict=True):
+    for n, (label, path) in enumerate(zip(surfaces.labels, outputs, strict=True)):
         extracted = surfaces[label]
+        mesh = meshes[n] if meshes is not None else extracted
         if writer.layer:  # each label's mesh is the layer's object of that id
             results.append(
                 ConvertResult(

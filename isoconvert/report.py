@@ -66,7 +66,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .checks import CHECK_NAMES, SEGMENT_CHECKS, TRIANGLE_CHECKS
+from .checks import CHECK_NAMES as CHECK_NAMES  # the names, and their parsing, live there
+from .checks import SEGMENT_CHECKS, TRIANGLE_CHECKS
+from .checks import parse_requirements as parse_requirements
 from .errors import FormatError, IsoconvertError, one_line
 from .geometry import flat_among, flat_bound, normalized_grid, triangle_cross
 from .graph import (
@@ -148,20 +150,6 @@ class Report:
             "notes": self.notes,
             **({"extraction": self.extraction} if self.extraction else {}),
         }
-
-
-def parse_requirements(text: str | None) -> list[str]:
-    """``"watertight,manifold"`` -> names; the error lists the known names."""
-    if not text:
-        return []
-    names = [n.strip() for n in text.split(",") if n.strip()]
-    unknown = [n for n in names if n not in CHECK_NAMES]
-    if unknown:
-        raise IsoconvertError(
-            f"unknown check {', '.join(map(repr, unknown))} for --require; "
-            f"choose from: {', '.join(CHECK_NAMES)}"
-        )
-    return names
 
 
 # --- the boundary of the domain ------------------------------------------------------

@@ -1,4 +1,5 @@
-"""How many threads the compiled kernels use (extraction and the mesh report)."""
+"""How many threads the compiled kernels use (extraction and the mesh report), and the
+settings of a process that runs one command (:func:`prepare_process`)."""
 
 from __future__ import annotations
 
@@ -38,3 +39,19 @@ def kernel_threads() -> int:
             "unset it to use every CPU"
         )
     return min(threads, cpus)
+
+
+def prepare_process() -> None:
+    """Settings for a process that runs one command and exits, before numpy is imported:
+
+    - freed memory is kept for the next arrays (:func:`isoconvert.memory.keep_freed_memory`);
+    - numpy's OpenBLAS gets one thread (unless ``OPENBLAS_NUM_THREADS`` says otherwise):
+      isoconvert does no large matrix products, but after any small one (a 3x3
+      determinant) OpenBLAS's threads spin for a while, on every core, against the
+      kernels' own threads (about 0.1 s of CPU in a labels run on two cores). Processes
+      the command starts (batch's workers) inherit it.
+    """
+    from .memory import keep_freed_memory
+
+    keep_freed_memory()
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")

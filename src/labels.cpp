@@ -545,15 +545,18 @@ class Net {
     Vec<i64> cell_of(static_cast<size_t>(nv));
     Vec<u8> sheet_of(static_cast<size_t>(nv));
     Vec<u8> junction(static_cast<size_t>(nv));
-    Vec<i64> nb(static_cast<size_t>(ne));
-    Vec<i64> nboff(static_cast<size_t>(nv + 1));
+    // the smoothing stencil, only for smoothing (unsmoothed: 40 bytes a vertex less)
+    const bool stencil = o_.iterations > 0;
+    Vec<i64> nb(static_cast<size_t>(stencil ? ne : 0));
+    Vec<i64> nboff(static_cast<size_t>(stencil ? nv + 1 : 0));
     iso::parallel_for(i64(chunks_.size()), o_.threads, 1, [&](int, i64 b, i64 e) {
       for (i64 c = b; c < e; ++c) {
         fill(chunks_[size_t(c)], corners.data(), flip.data(), out.pairs.data(), out.sides.data(),
-             cell_of.data(), sheet_of.data(), junction.data(), nb.data(), nboff.data());
+             cell_of.data(), sheet_of.data(), junction.data(), stencil ? nb.data() : nullptr,
+             stencil ? nboff.data() : nullptr);
       }
     });
-    nboff[size_t(nv)] = ne;
+    if (stencil) nboff[size_t(nv)] = ne;
     Vec<double> pos = smooth(cell_of, junction, nb, nboff, split_cells);
     // copies that still coincide (none seen in tests): the note counts them
     const i64 layer = (X_ + 1) * (Y_ + 1);
@@ -893,7 +896,7 @@ class Net {
             cell_of[c->first + s] = id;
             sheet_of[c->first + s] = u8(s);
             junction[c->first + s] = u8((c->junction >> s) & 1);
-            nboff[c->first + s] = c->nbfirst + e;
+            if (nboff) nboff[c->first + s] = c->nbfirst + e;
             write[s] = c->nbfirst + e;
             e += (c->nbcount >> (4 * s)) & 15;
           }
@@ -901,7 +904,7 @@ class Net {
           // the cells below along z, y, x: the order np.bincount summed them in
           const Cell *up[3] = {next_x, ny_, nz_};
           const Cell *down[3] = {prev_x, py_, pz_};
-          for (int k = 0; k < 6; ++k) {
+          for (int k = 0; nb && k < 6; ++k) {  // nb null: no stencil (no smoothing)
             const int b = k < 3 ? k : 5 - k;
             const int d = k < 3 ? 2 * b + 1 : 2 * b, other = k < 3 ? 2 * b : 2 * b + 1;
             const Cell *n = k < 3 ? up[b] : down[b];
@@ -1000,13 +1003,15 @@ class Net {
                      const Vec<i64> &nboff, const std::vector<const Cell *> &split_cells) {
     const i64 nv = i64(cell_of.size());
     const i64 cx = X_ + 1, cy = Y_ + 1;
-    Vec<double> pos(static_cast<size_t>(3 * nv)), centers(size_t(3 * nv));
+    // the centres (the boxes of the constraint) only for smoothing
+    Vec<double> pos(static_cast<size_t>(3 * nv)), centers(size_t(o_.iterations ? 3 * nv : 0));
+    double *box = o_.iterations ? centers.data() : pos.data();
     iso::parallel_for(nv, o_.threads, 1 << 15, [&](int, i64 b, i64 e) {
       for (i64 p = b; p < e; ++p) {
         const i64 id = cell_of[size_t(p)];
         const i64 c[3] = {id % cx, (id / cx) % cy, id / (cx * cy) + o_.z_offset};
         for (int k = 0; k < 3; ++k) {
-          centers[size_t(3 * p + k)] = pos[size_t(3 * p + k)] = double(c[k]) - 0.5;
+          box[3 * p + k] = pos[size_t(3 * p + k)] = double(c[k]) - 0.5;
         }
       }
     });
@@ -1070,21 +1075,11 @@ class Net {
   const std::vector<Cell> &two_;
 };
 
-// Triangles of the quads (cut along the shorter diagonal, 0-2 on ties) and
-// each wanted label's faces, vertices and re-indexed triangles.
-struct LabelSplit {
-  Vec<i64> cells;                   // (2Q, 3)
-  Vec<i64> faces;                   // per label, concatenated
-  std::vector<i64> face_off;        // (L + 1,)
-  Vec<i64> used;
-  std::vector<i64> used_off;
-  Vec<i64> local;                   // (sum F_L, 3)
-  Vec<double> verts;                // (sum V_L, 3)
-};
+// How each quad is cut into two triangles: along the shorter diagonal, 0-2 on
+// ties (cut[q] = 1: along 1-3); triangle t of quad q is (2 q + t) of the mesh.
+constexpr int kCutOrder[2][6] = {{0, 1, 2, 0, 2, 3}, {0, 1, 3, 1, 2, 3}};
 
-void split_labels(const i64 *corners, i64 nq, const double *v, i64 nv, const i32 *sides,
-                  i64 nlabels, int threads, LabelSplit &out) {
-  out.cells.resize(size_t(6 * nq));
+void quad_cuts(const i64 *corners, i64 nq, const double *v, int threads, u8 *cut) {
   iso::parallel_for(nq, threads, 1 << 15, [&](int, i64 b, i64 e) {
     for (i64 q = b; q < e; ++q) {
       const i64 *c = corners + 4 * q;
@@ -1093,105 +1088,99 @@ void split_labels(const i64 *corners, i64 nq, const double *v, i64 nv, const i32
                      dz = v[3 * i + 2] - v[3 * j + 2];
         return dx * dx + dy * dy + dz * dz;
       };
-      const bool cut13 = dist(c[1], c[3]) < dist(c[0], c[2]) * (1 - 1e-9);
-      i64 *t = &out.cells[size_t(6 * q)];
-      const int order[2][6] = {{0, 1, 2, 0, 2, 3}, {0, 1, 3, 1, 2, 3}};
-      for (int k = 0; k < 6; ++k) t[k] = c[order[cut13][k]];
+      cut[q] = u8(dist(c[1], c[3]) < dist(c[0], c[2]) * (1 - 1e-9));
     }
   });
-  // faces per label: those it is inside of, then those it is outside of
-  std::vector<i64> count(size_t(2 * nlabels + 1), 0);
-  for (i64 q = 0; q < nq; ++q) {
-    for (int s = 0; s < 2; ++s) {
-      if (sides[2 * q + s] >= 0) count[size_t(2 * sides[2 * q + s] + s)] += 2;
-    }
+}
+
+// Each wanted label's quads: those it is inside of, then those it is outside of,
+// each in quad order (label l's are quads[off[l] .. off[l + 1]], the first
+// inside[l] of them inside). Indices are int32 where every quad index fits.
+template <class I>
+void label_quads(const i32 *sides, i64 nq, i64 nlabels, Vec<I> &quads, std::vector<i64> &off,
+                 std::vector<i64> &inside) {
+  std::vector<i64> count(size_t(2 * nlabels), 0);
+  for (i64 k = 0; k < 2 * nq; ++k) {
+    if (sides[k] >= 0) ++count[size_t(2 * sides[k] + (k & 1))];
   }
-  std::vector<i64> at(static_cast<size_t>(2 * nlabels));
-  out.face_off.assign(size_t(nlabels + 1), 0);
+  std::vector<i64> at(size_t(2 * nlabels));
+  off.assign(size_t(nlabels + 1), 0);
+  inside.assign(size_t(nlabels), 0);
   i64 total = 0;
   for (i64 k = 0; k < 2 * nlabels; ++k) {
     at[size_t(k)] = total;
     total += count[size_t(k)];
-    if (k & 1) out.face_off[size_t(k / 2 + 1)] = total;
+    if (k & 1) off[size_t(k / 2 + 1)] = total;
+    else inside[size_t(k / 2)] = count[size_t(k)];
   }
-  out.faces.resize(size_t(total));
-  for (i64 q = 0; q < nq; ++q) {
-    for (int s = 0; s < 2; ++s) {
-      const i32 l = sides[2 * q + s];
-      if (l < 0) continue;
-      i64 &p = at[size_t(2 * l + s)];
-      out.faces[size_t(p++)] = 2 * q;
-      out.faces[size_t(p++)] = 2 * q + 1;
+  quads.resize(size_t(total));
+  for (i64 k = 0; k < 2 * nq; ++k) {
+    if (sides[k] >= 0) quads[size_t(at[size_t(2 * sides[k] + (k & 1))]++)] = I(k >> 1);
+  }
+}
+
+// One label's surface from its quads (label_quads): the combined mesh's
+// triangles it has (faces), its vertices (used, ascending) and their positions,
+// and its triangles over them (those it is outside of reversed).
+struct OneLabel {
+  Vec<i64> faces, used, local;
+  Vec<double> verts;
+};
+
+template <class I>
+void label_mesh(const i64 *corners, const u8 *cut, const double *v, const I *quads, i64 n,
+                i64 inside, OneLabel &out) {
+  i64 lo = std::numeric_limits<i64>::max(), hi = -1;
+  for (i64 k = 0; k < n; ++k) {
+    const i64 *c = corners + 4 * i64(quads[k]);
+    for (int j = 0; j < 4; ++j) {
+      lo = std::min(lo, c[j]);
+      hi = std::max(hi, c[j]);
     }
   }
-  out.local.resize(size_t(3 * total));
-  std::vector<Vec<i64>> used(static_cast<size_t>(nlabels));
-  const int workers = std::max(1, threads);
-  std::vector<std::vector<u64>> bits(static_cast<size_t>(workers));
-  std::vector<std::vector<i32>> before(static_cast<size_t>(workers));
-  // Per label: its vertices as bits of a bitmap, listed in increasing order; a
+  out.faces.resize(size_t(2 * n));
+  out.local.resize(size_t(6 * n));
+  if (n == 0) return;
+  // its vertices as bits of a bitmap over lo..hi, listed in increasing order; a
   // vertex's new index is the number of bits before it (a word's prefix count
-  // plus a popcount): lookups in two small arrays, not one of V entries.
-  iso::parallel_for(nlabels, threads, 1, [&](int w, i64 b, i64 e) {
-    auto &mark = bits[size_t(w)];
-    auto &prefix = before[size_t(w)];
-    if (mark.empty()) {
-      mark.assign(size_t(nv / 64 + 1), 0);
-      prefix.resize(size_t(nv / 64 + 1));
-    }
-    for (i64 l = b; l < e; ++l) {
-      const i64 f0 = out.face_off[size_t(l)], f1 = out.face_off[size_t(l + 1)];
-      i64 lo = nv, hi = -1;
-      for (i64 k = f0; k < f1; ++k) {
-        const i64 *t = &out.cells[size_t(3 * out.faces[size_t(k)])];
-        for (int j = 0; j < 3; ++j) {
-          mark[size_t(t[j] >> 6)] |= u64(1) << (t[j] & 63);
-          lo = std::min(lo, t[j]);
-          hi = std::max(hi, t[j]);
-        }
-      }
-      auto &list = used[size_t(l)];
-      i64 n = 0;
-      for (i64 word = lo >> 6; hi >= 0 && word <= hi >> 6; ++word) {
-        prefix[size_t(word)] = i32(n);
-        n += iso::popcount(mark[size_t(word)]);
-      }
-      list.resize(size_t(n));
-      for (i64 word = lo >> 6, k = 0; hi >= 0 && word <= hi >> 6; ++word) {
-        for (u64 m = mark[size_t(word)]; m; m &= m - 1) list[size_t(k++)] = 64 * word + iso::ctz(m);
-      }
-      auto local = [&](i64 v) {
-        const u64 below = mark[size_t(v >> 6)] & ((u64(1) << (v & 63)) - 1);
-        return i64(prefix[size_t(v >> 6)]) + iso::popcount(below);
-      };
-      // an outside label sees the triangle from the other side: reversed
-      const i64 inside_end = f0 + count[size_t(2 * l)];
-      for (i64 k = f0; k < f1; ++k) {
-        const i64 *t = &out.cells[size_t(3 * out.faces[size_t(k)])];
-        i64 *to = &out.local[size_t(3 * k)];
-        for (int j = 0; j < 3; ++j) to[j] = local(t[k < inside_end ? j : 2 - j]);
-      }
-      for (i64 word = lo >> 6; hi >= 0 && word <= hi >> 6; ++word) mark[size_t(word)] = 0;
-    }
-  });
-  out.used_off.assign(size_t(nlabels + 1), 0);
-  for (i64 l = 0; l < nlabels; ++l) {
-    out.used_off[size_t(l + 1)] = out.used_off[size_t(l)] + i64(used[size_t(l)].size());
+  // plus a popcount)
+  const i64 w0 = lo >> 6, words = (hi >> 6) - w0 + 1;
+  std::vector<u64> mark(size_t(words), 0);
+  std::vector<i64> prefix(static_cast<size_t>(words));
+  for (i64 k = 0; k < n; ++k) {
+    const i64 *c = corners + 4 * i64(quads[k]);
+    for (int j = 0; j < 4; ++j) mark[size_t((c[j] >> 6) - w0)] |= u64(1) << (c[j] & 63);
   }
-  out.used.resize(size_t(out.used_off[size_t(nlabels)]));
-  out.verts.resize(size_t(3 * out.used.size()));
-  iso::parallel_for(nlabels, threads, 1, [&](int, i64 b, i64 e) {
-    for (i64 l = b; l < e; ++l) {
-      const i64 base = out.used_off[size_t(l)];
-      const auto &list = used[size_t(l)];
-      for (size_t k = 0; k < list.size(); ++k) {
-        out.used[size_t(base) + k] = list[k];
-        for (int j = 0; j < 3; ++j) {
-          out.verts[size_t(3 * (base + i64(k)) + j)] = v[size_t(3 * list[k] + j)];
-        }
-      }
+  i64 nu = 0;
+  for (i64 w = 0; w < words; ++w) {
+    prefix[size_t(w)] = nu;
+    nu += iso::popcount(mark[size_t(w)]);
+  }
+  out.used.resize(size_t(nu));
+  out.verts.resize(size_t(3 * nu));
+  for (i64 w = 0, k = 0; w < words; ++w) {
+    for (u64 m = mark[size_t(w)]; m; m &= m - 1, ++k) {
+      const i64 id = 64 * (w0 + w) + iso::ctz(m);
+      out.used[size_t(k)] = id;
+      for (int j = 0; j < 3; ++j) out.verts[size_t(3 * k + j)] = v[size_t(3 * id + j)];
     }
-  });
+  }
+  auto local = [&](i64 id) {
+    const i64 w = (id >> 6) - w0;
+    return prefix[size_t(w)] + iso::popcount(mark[size_t(w)] & ((u64(1) << (id & 63)) - 1));
+  };
+  for (i64 k = 0; k < n; ++k) {
+    const i64 q = i64(quads[k]);
+    const i64 *c = corners + 4 * q;
+    const int *order = kCutOrder[cut[q]];
+    out.faces[size_t(2 * k)] = 2 * q;
+    out.faces[size_t(2 * k + 1)] = 2 * q + 1;
+    // a label outside of the quad sees its triangles from the other side: reversed
+    for (int t = 0; t < 2; ++t) {
+      i64 *to = &out.local[size_t(6 * k + 3 * t)];
+      for (int j = 0; j < 3; ++j) to[j] = local(c[order[3 * t + (k < inside ? j : 2 - j)]]);
+    }
+  }
 }
 
 template <class T>
@@ -1280,38 +1269,110 @@ void bind_labels(nb::module_ &m) {
       "rank (n,) int64: each of 0..n-1 numbered in the order it first comes in indices "
       "(-1 where it never does), as label_net numbers vertices by their first quad corner.");
   m.def(
-      "label_meshes",
+      "label_quads",
       [](Int64s corners, Doubles vertices, nb::ndarray<const i32, nb::c_contig, nb::device::cpu> sides,
          i64 nlabels, int threads) {
         if (corners.ndim() != 2 || corners.shape(1) != 4 || vertices.ndim() != 2 ||
             vertices.shape(1) != 3 || sides.ndim() != 2 || sides.shape(1) != 2 ||
             sides.shape(0) != corners.shape(0) || nlabels < 0) {
           throw std::invalid_argument(
-              "label_meshes: corners (Q, 4), vertices (V, 3), sides (Q, 2), nlabels >= 0");
+              "label_quads: corners (Q, 4), vertices (V, 3), sides (Q, 2), nlabels >= 0");
         }
         const i64 nq = i64(corners.shape(0)), nv = i64(vertices.shape(0));
         for (i64 k = 0; k < 4 * nq; ++k) {
           if (corners.data()[k] < 0 || corners.data()[k] >= nv) {
-            throw std::invalid_argument("label_meshes: a corner is not a vertex");
+            throw std::invalid_argument("label_quads: a corner is not a vertex");
           }
         }
         for (i64 k = 0; k < 2 * nq; ++k) {
           if (sides.data()[k] < -1 || sides.data()[k] >= nlabels) {
-            throw std::invalid_argument("label_meshes: a side is not a label index");
+            throw std::invalid_argument("label_quads: a side is not a label index");
           }
         }
-        LabelSplit s;
+        Vec<u8> cut(static_cast<size_t>(nq));
+        Vec<i32> small;
+        Vec<i64> large;
+        std::vector<i64> off, inside;
         {
           nb::gil_scoped_release unlocked;
-          split_labels(corners.data(), nq, vertices.data(), nv, sides.data(), nlabels, threads,
-                       s);
+          quad_cuts(corners.data(), nq, vertices.data(), threads, cut.data());
+          if (nq <= i64(std::numeric_limits<i32>::max())) {
+            label_quads(sides.data(), nq, nlabels, small, off, inside);
+          } else {
+            label_quads(sides.data(), nq, nlabels, large, off, inside);
+          }
         }
-        return nb::make_tuple(give(std::move(s.cells), 3), give(std::move(s.faces)),
-                              give(std::move(s.face_off)), give(std::move(s.used)),
-                              give(std::move(s.used_off)), give(std::move(s.local), 3),
-                              give(std::move(s.verts), 3));
+        nb::object quads = nq <= i64(std::numeric_limits<i32>::max()) ? give(std::move(small))
+                                                                      : give(std::move(large));
+        return nb::make_tuple(give(std::move(cut)), quads, give(std::move(off)),
+                              give(std::move(inside)));
       },
       "corners"_a, "vertices"_a, "sides"_a, "nlabels"_a, "threads"_a,
-      "(cells (2Q, 3), faces, face_offsets, used, used_offsets, local (F, 3), verts (U, 3)): "
-      "the triangles and each label's faces, vertices and re-indexed triangles.");
+      "(cut (Q,) uint8, quads, offsets (L + 1,), inside (L,)): how each quad is cut into "
+      "triangles, and each label's quads (int32 or int64; those it is inside of first).");
+  m.def(
+      "label_triangles",
+      [](Int64s corners, nb::ndarray<const u8, nb::ndim<1>, nb::c_contig, nb::device::cpu> cut,
+         int threads) {
+        if (corners.ndim() != 2 || corners.shape(1) != 4 || cut.shape(0) != corners.shape(0)) {
+          throw std::invalid_argument("label_triangles: corners (Q, 4), cut (Q,)");
+        }
+        const i64 nq = i64(corners.shape(0));
+        Vec<i64> cells(static_cast<size_t>(6 * nq));
+        {
+          nb::gil_scoped_release unlocked;
+          const i64 *c = corners.data();
+          const u8 *k = cut.data();
+          iso::parallel_for(nq, threads, 1 << 15, [&](int, i64 b, i64 e) {
+            for (i64 q = b; q < e; ++q) {
+              for (int j = 0; j < 6; ++j) cells[size_t(6 * q + j)] = c[4 * q + kCutOrder[k[q] != 0][j]];
+            }
+          });
+        }
+        return give(std::move(cells), 3);
+      },
+      "corners"_a, "cut"_a, "threads"_a,
+      "(2Q, 3) int64: the two triangles of each quad, cut as label_quads says.");
+  auto one = [](Int64s corners, nb::ndarray<const u8, nb::ndim<1>, nb::c_contig, nb::device::cpu> cut,
+                Doubles vertices, auto quads, i64 inside) {
+    const i64 nq = i64(corners.shape(0)), nv = i64(vertices.shape(0)), n = i64(quads.shape(0));
+    if (corners.ndim() != 2 || corners.shape(1) != 4 || cut.shape(0) != corners.shape(0) ||
+        vertices.ndim() != 2 || vertices.shape(1) != 3 || inside < 0 || inside > n) {
+      throw std::invalid_argument(
+          "label_mesh: corners (Q, 4), cut (Q,), vertices (V, 3), 0 <= inside <= quads");
+    }
+    for (i64 k = 0; k < n; ++k) {
+      const i64 q = i64(quads.data()[k]);
+      if (q < 0 || q >= nq) throw std::invalid_argument("label_mesh: a quad index is out of range");
+      for (int j = 0; j < 4; ++j) {
+        const i64 c = corners.data()[4 * q + j];
+        if (c < 0 || c >= nv) throw std::invalid_argument("label_mesh: a corner is not a vertex");
+      }
+    }
+    OneLabel r;
+    {
+      nb::gil_scoped_release unlocked;
+      label_mesh(corners.data(), cut.data(), vertices.data(), quads.data(), n, inside, r);
+    }
+    return nb::make_tuple(give(std::move(r.faces)), give(std::move(r.used)),
+                          give(std::move(r.local), 3), give(std::move(r.verts), 3));
+  };
+  const char *one_doc =
+      "(faces (2n,), used (U,), local (2n, 3), verts (U, 3)): one label's triangles of the "
+      "combined mesh, its vertices, and its triangles over them, from its n quads of "
+      "label_quads (the first `inside` of them it is inside of).";
+  m.def(
+      "label_mesh",
+      [one](Int64s corners, nb::ndarray<const u8, nb::ndim<1>, nb::c_contig, nb::device::cpu> cut,
+            Doubles vertices, nb::ndarray<const i32, nb::ndim<1>, nb::c_contig, nb::device::cpu> quads,
+            i64 inside) { return one(corners, cut, vertices, quads, inside); },
+      "corners"_a, "cut"_a, "vertices"_a, "quads"_a.noconvert(), "inside"_a, one_doc);
+  m.def(
+      "label_mesh",
+      [one](Int64s corners, nb::ndarray<const u8, nb::ndim<1>, nb::c_contig, nb::device::cpu> cut,
+            Doubles vertices, Int64s quads, i64 inside) {
+        if (quads.ndim() != 1) throw std::invalid_argument("label_mesh: quads (n,)");
+        return one(corners, cut, vertices, quads, inside);
+      },
+      "corners"_a, "cut"_a, "vertices"_a, "quads"_a, "inside"_a, one_doc);
 }

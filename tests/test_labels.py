@@ -315,3 +315,60 @@ def test_errors():
     assert label_surfaces(floats, smoothing=0).labels == [3, 5, 7, 9]
     for err in (VolumeError, LevelError):
         assert issubclass(err, IsoconvertError)
+
+
+# --- built on first access ------------------------------------------------------------------
+
+
+def test_per_label_mappings_are_built_once_on_access():
+    from collections.abc import Mapping
+
+    result = label_surfaces(atlas(), smoothing=2)
+    for mapping in (result.meshes, result.vertex_map, result.face_map):
+        assert isinstance(mapping, Mapping)
+        assert list(mapping) == result.labels == [3, 5, 7, 9] and len(mapping) == 4
+        assert 5 in mapping and np.int64(5) in mapping
+        assert 4 not in mapping and "5" not in mapping and 5.0 not in mapping
+        for missing in (4, 0, -1, "5", 5.5, True):
+            with pytest.raises(KeyError):
+                mapping[missing]
+    assert not result._meshes and not result._maps  # nothing built until asked for
+    mesh = result.meshes[np.int64(7)]
+    assert mesh is result[7] is result.meshes[7] and list(result._meshes) == [7]
+    assert not result._maps  # the maps only when asked for
+    assert result.vertex_map[7] is result.vertex_map[7] and list(result._maps) == [7]
+    assert result[7] is mesh  # the same mesh, kept
+    assert result.face_map[5] is result.face_map[5] and list(result._meshes) == [7, 5]
+    assert set(dict(result.meshes)) == {3, 5, 7, 9}
+    assert [m.info["label"] for m in result.meshes.values()] == [3, 5, 7, 9]
+    # each label's info is its own (no dict shared between labels)
+    result[3].info["grid"]["shape"] = None
+    assert result[5].info["grid"]["shape"] is not None
+    assert result.combined is result.combined
+
+
+def test_label_mesh_kernel_with_either_index_type_and_its_checks():
+    from isoconvert import _native
+
+    result = label_surfaces(Volume(random_labels()), smoothing=0)
+    net = result._net
+    for n, label in enumerate(result.labels):
+        quads = net.quads[net.offsets[n] : net.offsets[n + 1]]
+        assert quads.dtype == np.int32  # every quad index fits
+        args = (net.corners, net.cut, net.vertices)
+        small = _native.label_mesh(*args, quads, int(net.inside[n]))
+        large = _native.label_mesh(*args, quads.astype(np.int64), int(net.inside[n]))
+        for a, b in zip(small, large, strict=True):
+            assert np.array_equal(a, b)
+        faces, used, local, verts = small
+        assert np.array_equal(faces, result.face_map[label])
+        assert np.array_equal(used, result.vertex_map[label])
+        assert np.array_equal(local, result[label].cells)
+    args = (net.corners, net.cut, net.vertices)
+    with pytest.raises(ValueError, match="quad index"):
+        _native.label_mesh(*args, np.array([len(net.corners)], dtype=np.int32), 0)
+    with pytest.raises(ValueError, match="inside"):
+        _native.label_mesh(*args, np.array([0], dtype=np.int32), 2)
+    with pytest.raises(ValueError, match="side is not a label"):
+        _native.label_quads(net.corners, net.vertices, np.full((len(net.corners), 2), 9,
+                            dtype=np.int32), 4, 1)  # fmt: skip

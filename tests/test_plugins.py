@@ -103,3 +103,29 @@ def test_broken_plugins_fail_with_one_line(plugin):
 def test_unknown_method_lists_the_choices():
     with pytest.raises(IsoconvertError, match="choose one of: cubes, tetra, squares"):
         extract(read_volume(SAMPLES / "sphere.nrrd"), 127.5, method="nope")
+
+
+def test_convert_help_lists_the_plugin_methods(plugin, capsys):
+    """--method's help names the installed methods, plugins included, though a run
+    that shows no help never looks the plugins up (isoconvert.cli.options.METHOD_NAMES)."""
+    assert main(["convert", "--help"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "cubes, tetra, squares" in out and "bbox" in out
+    assert "<the extraction methods>" not in out
+
+
+def test_a_run_looks_no_plugins_up(tmp_path):
+    import subprocess
+    import sys
+
+    script = (
+        "import sys\n"
+        "from isoconvert.cli import main\n"
+        f"code = main(['convert', {str(SAMPLES / 'sphere.nrrd')!r}, '-l', '127.5', '-q',\n"
+        f"             '-o', {str(tmp_path / 's.ply')!r}])\n"
+        "assert code == 0, code\n"
+        "print('importlib.metadata' in sys.modules)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["False"]

@@ -197,3 +197,64 @@ def test_declared_entries_are_listed_without_import_and_loaded_on_get():
         table.get("gone")
     with pytest.raises(ValueError, match="already registered"):
         table.declare("json", "json:dumps", summary="again")
+
+
+KEPT = """
+import sys
+import numpy as np
+from isoconvert.memory import keep_freed_memory
+
+def rss():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096
+
+took = keep_freed_memory() if sys.argv[1] == "keep" else None
+before = rss()
+a = np.ones(2_000_000)  # 16 MB: glibc maps it on its own by default
+del a
+print(took, (rss() - before) // 2**20)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
+def test_the_command_keeps_freed_memory_for_its_next_arrays():
+    """keep_freed_memory (called by the isoconvert command): a freed 16 MB array's pages
+    stay with the process for the next one instead of going back to the system."""
+    out = {}
+    for mode in ("keep", "default"):
+        proc = subprocess.run([sys.executable, "-c", KEPT, mode], capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr
+        out[mode] = proc.stdout.split()
+    if out["keep"][0] != "True":
+        pytest.skip("not glibc: mallopt is not there")
+    assert int(out["keep"][1]) >= 12  # kept
+    assert out["default"][0] == "None" and int(out["default"][1]) < 4  # given back
+
+
+BLAS = """
+import os, sys
+if sys.argv[1] == "prepared":
+    from isoconvert.threads import prepare_process
+    prepare_process()
+import numpy
+print(os.environ.get("OPENBLAS_NUM_THREADS"), len(os.listdir("/proc/self/task")))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc/self/task")
+def test_the_command_process_gives_numpy_blas_one_thread(monkeypatch):
+    """prepare_process (the isoconvert command's start): OpenBLAS starts no threads of
+    its own to spin against the kernels', unless the user asked for some."""
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+
+    def run(mode):
+        proc = subprocess.run([sys.executable, "-c", BLAS, mode], capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr
+        setting, threads = proc.stdout.split()
+        return setting, int(threads)
+
+    assert run("prepared") == ("1", 1)
+    setting, threads = run("plain")
+    assert setting == "None"
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")  # the user's own setting is kept
+    assert run("prepared")[0] == "2"

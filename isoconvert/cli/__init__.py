@@ -8,6 +8,7 @@ groups (``ReadArgs``, ``ExtractArgs``, ...), and both commands build their
 
 Its modules, each importing only those listed before it (so no circle):
 
+- ``coercion``: option values turned into Python values without pydantic;
 - ``options``: the option groups and the options several commands take;
 - ``display``: progress, the stage clock, notices and batch's table;
 - ``reports``: mesh reports printed or written, exit code 4;
@@ -36,6 +37,7 @@ from .. import __version__
 from ..errors import IsoconvertError, one_line
 from . import display
 from .batch_cmd import batch
+from .coercion import plain_coercion
 from .convert_cmd import convert
 from .inspect_cmds import check, formats, info, methods, preview, warmup
 from .options import (
@@ -47,6 +49,7 @@ from .options import (
     PostArgs,
     ReadArgs,
     _flag,
+    with_method_names,
 )
 
 __all__ = [
@@ -86,11 +89,19 @@ class _HelpAsFlag:
 
 
 class _Command(_HelpAsFlag, typer.core.TyperCommand):
-    pass
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        plain_coercion(self.params)  # option values without pydantic (0.1 s a run)
+
+    def format_help(self, ctx, formatter) -> None:
+        with_method_names(self.params)  # the plugins are looked up for a help only
+        super().format_help(ctx, formatter)
 
 
 class _Group(_HelpAsFlag, typer.core.TyperGroup):
-    pass
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        plain_coercion(self.params)
 
 
 app = typer.Typer(
@@ -323,4 +334,7 @@ def _is_usage_error(exc: Exception) -> bool:
 
 def run() -> None:
     """Console-script entry point."""
+    from ..threads import prepare_process
+
+    prepare_process()
     sys.exit(main())

@@ -2,6 +2,8 @@
 
 import sys
 
+from ..threads import prepare_process
 from . import main
 
+prepare_process()
 sys.exit(main())

@@ -82,8 +82,8 @@ def batch(
     """Convert many volumes: files, folders (--recursive) and globs, in parallel."""
     _quiet_third_party()
     from .. import batch as batching
+    from ..checks import parse_requirements
     from ..readers.stacks import natural_text_key
-    from ..report import parse_requirements
 
     required = parse_requirements(require)
     writer = WRITERS.get(mesh.format or "ply")

@@ -85,7 +85,7 @@ def convert(
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
     _quiet_third_party()
-    from ..report import parse_requirements
+    from ..checks import parse_requirements
 
     required = parse_requirements(require)
     from ..convert import convert_levels, level_outputs

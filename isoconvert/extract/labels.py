@@ -83,8 +83,9 @@ start off their dual cell's centre (see above).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+import copy
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -132,30 +133,38 @@ class SmoothingOptions:
             raise VolumeError(f"smoothing constraint must be > 0 voxels, got {self.constraint!r}")
 
 
-@dataclass
 class LabelMeshes:
     """Surfaces of the labels of a label volume, and the mesh they share.
 
+    Each label's surface, and the combined mesh's triangles, are built from the
+    surface net the first time they are asked for (then kept): a caller writing
+    one file per label never holds the combined triangles, nor every label's
+    surface at once before the first file is written.
+
     Attributes
     ----------
-    meshes : dict of int -> Mesh
+    meshes : mapping of int -> Mesh
         One closed surface per extracted label, normals pointing out of the
         label; its vertices are those of ``combined`` it uses, re-indexed
-        compactly. ``info["label"]`` is the label value.
+        compactly. ``info["label"]`` is the label value. A read-only mapping
+        (``[]``, ``items()``, ``values()``, ``len()``, iteration in label order),
+        each mesh built on first access; ``dict(meshes)`` gives a dict.
     combined : Mesh
         Every boundary quad once (two triangles), for ``--single-file``:
         ``vertices (V, 3) float64`` in world units, ``cells (C, 3) int64``
         with normals pointing from ``boundary_labels[:, 0]`` to
-        ``boundary_labels[:, 1]``.
+        ``boundary_labels[:, 1]``. Its cells are built on first access.
     boundary_labels : (C, 2) int64
         For each triangle of ``combined``: (label inside, label outside). The
         outside is the background (or a label not extracted) when one side is;
         between two extracted labels, the smaller value is inside.
-    vertex_map : dict of int -> (V_L,) int64
-        ``meshes[L].vertices == combined.vertices[vertex_map[L]]``.
-    face_map : dict of int -> (C_L,) int64
+    vertex_map : mapping of int -> (V_L,) int64
+        ``meshes[L].vertices == combined.vertices[vertex_map[L]]`` (a mapping
+        as ``meshes``).
+    face_map : mapping of int -> (C_L,) int64
         ``vertex_map[L][meshes[L].cells]`` is ``combined.cells[face_map[L]]``,
-        reversed (``[:, ::-1]``) where ``boundary_labels[face_map[L], 1] == L``.
+        reversed (``[:, ::-1]``) where ``boundary_labels[face_map[L], 1] == L``
+        (a mapping as ``meshes``).
     dual_cells : (V,) int64
         For each vertex of ``combined``, its dual cell ``i + (X + 1) * (j + (Y +
         1) * k)``: the block of samples ``i - 1..i, j - 1..j, k - 1..k`` (index
@@ -174,21 +183,42 @@ class LabelMeshes:
         The smallest and largest sample of the volume (labels and background).
     """
 
-    meshes: dict[int, Mesh]
-    combined: Mesh
-    boundary_labels: np.ndarray
-    vertex_map: dict[int, np.ndarray] = field(default_factory=dict)
-    face_map: dict[int, np.ndarray] = field(default_factory=dict)
-    dual_cells: np.ndarray | None = None
-    split_vertices: int = 0
-    unresolved: int = 0
-    unresolved_outside: int = 0
-    value_range: tuple[float, float] = (0.0, 0.0)
+    def __init__(
+        self,
+        net: _Net,
+        boundary_labels: np.ndarray,
+        dual_cells: np.ndarray,
+        split_vertices: int = 0,
+        unresolved: int = 0,
+        unresolved_outside: int = 0,
+        value_range: tuple[float, float] = (0.0, 0.0),
+    ) -> None:
+        self._net = net
+        self._meshes: dict[int, Mesh] = {}
+        self._maps: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._combined: Mesh | None = None
+        self.boundary_labels = boundary_labels
+        self.dual_cells = dual_cells
+        self.split_vertices = split_vertices
+        self.unresolved = unresolved
+        self.unresolved_outside = unresolved_outside
+        self.value_range = value_range
+        self.meshes = _PerLabel(self, 0)
+        self.vertex_map = _PerLabel(self, 1)
+        self.face_map = _PerLabel(self, 2)
+
+    @property
+    def combined(self) -> Mesh:
+        if self._combined is None:
+            net = self._net
+            cells = _native.label_triangles(net.corners, net.cut, kernel_threads())
+            self._combined = Mesh(net.vertices, cells, None, net.info)
+        return self._combined
 
     @property
     def labels(self) -> list[int]:
         """The extracted label values, ascending."""
-        return sorted(self.meshes)
+        return list(self._net.index)
 
     def __getitem__(self, label: int) -> Mesh:
         return self.meshes[int(label)]
@@ -197,7 +227,76 @@ class LabelMeshes:
         return iter(self.labels)
 
     def __len__(self) -> int:
-        return len(self.meshes)
+        return len(self._net.index)
+
+    def _part(self, label: int, which: int) -> Mesh | np.ndarray:
+        """The mesh (0), vertex map (1) or face map (2) of ``label``, built on first
+        use. The maps are kept only once asked for: writing every label's mesh
+        needs neither (a quarter of the memory of the meshes)."""
+        if which == 0:
+            mesh = self._meshes.get(label)
+            if mesh is None:
+                mesh = self._meshes.setdefault(label, self._build(label)[0])
+            return mesh
+        maps = self._maps.get(label)
+        if maps is None:
+            mesh, *built = self._build(label)
+            self._meshes.setdefault(label, mesh)
+            maps = self._maps.setdefault(label, tuple(built))
+        return maps[which - 1]
+
+    def _build(self, label: int) -> tuple[Mesh, np.ndarray, np.ndarray]:
+        """(mesh, vertex map, face map) of ``label``, anew."""
+        net = self._net
+        n = net.index[label]  # KeyError for a label not extracted
+        q0, q1 = net.offsets[n], net.offsets[n + 1]
+        faces, used, local, verts = _native.label_mesh(
+            net.corners, net.cut, net.vertices, net.quads[q0:q1], int(net.inside[n])
+        )
+        info = copy.deepcopy(net.label_info)
+        info["level"] = float(label)
+        info["label"] = int(label)
+        info["smoothing"] = dict(net.info["smoothing"])
+        return Mesh(verts, local, None, info), used, faces
+
+
+@dataclass(frozen=True)
+class _Net:
+    """What the per-label surfaces and the combined mesh are built from."""
+
+    vertices: np.ndarray  # (V, 3) world positions
+    corners: np.ndarray  # (Q, 4) quads
+    cut: np.ndarray  # (Q,) uint8: how each quad is cut into triangles
+    quads: np.ndarray  # each label's quads (label_quads)
+    offsets: np.ndarray  # (L + 1,)
+    inside: np.ndarray  # (L,)
+    index: dict[int, int]  # label value -> its index among the extracted, ascending
+    info: dict  # the combined mesh's
+    label_info: dict  # a label's, but for its level and label
+
+
+class _PerLabel(Mapping):
+    """One of a LabelMeshes' per-label mappings, built on first access."""
+
+    def __init__(self, owner: LabelMeshes, which: int) -> None:
+        self._owner, self._which = owner, which
+
+    def __getitem__(self, label: int):
+        if isinstance(label, (bool, np.bool_)) or not isinstance(label, (int, np.integer)):
+            raise KeyError(label)
+        return self._owner._part(int(label), self._which)
+
+    def __iter__(self):
+        return iter(self._owner.labels)
+
+    def __len__(self) -> int:
+        return len(self._owner)
+
+    def __contains__(self, label: object) -> bool:
+        return isinstance(label, (int, np.integer)) and int(label) in self._owner._net.index
+
+    def __repr__(self) -> str:
+        return f"<{len(self)} labels: {self._owner.labels[:10]}{'...' if len(self) > 10 else ''}>"
 
 
 def label_surfaces(
@@ -285,7 +384,7 @@ def label_surfaces(
     if (split or unresolved or outside) and on_status:
         on_status(_split_note(int(split), int(unresolved), int(outside)))
     vertices = volume.index_to_world(positions)
-    cells, faces, face_offsets, used, used_offsets, local, label_vertices = _native.label_meshes(
+    cut, quads, offsets, inside = _native.label_quads(
         corners, vertices, sides, len(wanted), threads
     )
 
@@ -296,27 +395,26 @@ def label_surfaces(
         "relaxation": options.relaxation,
         "constraint": options.constraint,
     }
-    combined = Mesh(vertices, cells, None, info)
-    result = LabelMeshes(
-        {},
-        combined,
+    net = _Net(
+        vertices,
+        corners,
+        cut,
+        quads,
+        offsets,
+        inside,
+        {int(v): n for n, v in enumerate(wanted.tolist())},
+        info,
+        mesh_info(volume, "labels", 0.0, flip=False),
+    )
+    return LabelMeshes(
+        net,
         pairs,
-        dual_cells=dual_cells,
+        dual_cells,
         split_vertices=int(split),
         unresolved=int(unresolved),
         unresolved_outside=int(outside),
         value_range=(vmin, vmax),
     )
-    for index, label in enumerate(wanted.tolist()):
-        f0, f1 = face_offsets[index], face_offsets[index + 1]
-        v0, v1 = used_offsets[index], used_offsets[index + 1]
-        label_info = mesh_info(volume, "labels", float(label), flip=False)
-        label_info["label"] = int(label)
-        label_info["smoothing"] = dict(info["smoothing"])
-        result.meshes[label] = Mesh(label_vertices[v0:v1], local[f0:f1], None, label_info)
-        result.vertex_map[label] = used[v0:v1]
-        result.face_map[label] = faces[f0:f1]
-    return result
 
 
 def _net_in_slabs(
