@@ -199,15 +199,7 @@ def wants_blocks(volume: Volume, blocks: Blocks | None, itemsize: int) -> bool:
         return True
     if volume.grid is None:
         return False
-    return _layers(volume.shape, itemsize, blocks) < volume.shape[2]
-
-
-def _layers(shape: tuple[int, ...], itemsize: int, blocks: Blocks) -> int:
-    """Sample layers a slab may read within half the budget."""
-    if blocks.size is not None:
-        return blocks.size
-    layer = shape[0] * shape[1] * max(itemsize, 1) * _SLAB_COPIES
-    return max(1, blocks.budget // 2 // layer)
+    return blocks.layers(volume.shape, itemsize) < volume.shape[2]
 
 
 def slab_jobs(
@@ -229,7 +221,7 @@ def slab_jobs(
     if blocks.size is not None:
         own = blocks.size
     else:
-        fits = _layers(volume.shape, itemsize, blocks)
+        fits = blocks.layers(volume.shape, itemsize)  # sample layers within half the budget
         # at least as many owned layers as the halo: thinner slabs would read
         # the volume more than three times over
         own = max(fits - 2 * halo - 2, halo)
