@@ -24,6 +24,8 @@ def check_output(
     force: bool = False,
     example: str = "mesh.ply",
     inputs: Iterable[str | Path] = (),
+    *,
+    probe: bool = True,
 ) -> Path:
     """Fail early, before any work, when ``path`` cannot be written.
 
@@ -37,6 +39,10 @@ def check_output(
     inputs : iterable of str or Path
         The files (and folders) the run reads: ``path`` must be none of them,
         by device and inode, so no symlink or hard link hides one.
+    probe : bool
+        Make and remove a temporary file in the folder, which permissions alone do
+        not prove possible; False where that was done for another file of the same
+        folder, or where the file is made next (:func:`atomic_output`).
 
     Raises
     ------
@@ -74,6 +80,8 @@ def check_output(
         )
     if path.exists() and not force:
         raise OutputError(f"{path}: already exists; pass --force to overwrite it")
+    if not probe:
+        return path
     # permissions do not tell everything (root, read-only mounts, /proc): the
     # temporary file the output is written to must be creatable there
     signals.defer()  # a signal is held until the probe is gone again
@@ -249,7 +257,8 @@ def atomic_output(
     written to a temporary file first and copied to the stream once complete,
     so a failed run sends nothing, and writers may seek.
     """
-    path = check_output(path, force, example, inputs)
+    # no probe: the temporary file made below fails the same way
+    path = check_output(path, force, example, inputs, probe=False)
     stream = output_stream(path)
     folder = tempfile.gettempdir() if stream is not None else path.parent
     # the temporary name always fits the folder's limit, however long the user's is

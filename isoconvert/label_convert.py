@@ -22,6 +22,7 @@ from .errors import IsoconvertError
 from .extract.tables import DEFAULT_AMBIGUITY
 from .grid import grid_slab_zyx
 from .post.pipeline import EmptyMeshError, post_process
+from .threads import kernel_threads, threaded_in_order
 from .volume import Volume
 from .writers import check_attributes, output_format
 from .writers.precomputed import check_layer, data_type_for, write_precomputed
@@ -104,8 +105,8 @@ def convert_labels(
                 "--single-file; write one file per label instead"
             )
     elif opts.labels:
-        for path in label_outputs(output, opts.labels):
-            check_output(path, opts.force)
+        for n, path in enumerate(label_outputs(output, opts.labels)):
+            check_output(path, opts.force, probe=n == 0)
     known = [output] if opts.single_file or writer.layer else label_outputs(output, opts.labels)
     refuse_shared([*known, *also_writes])
     for path in [*known, *also_writes]:  # the input itself, before its header is read
@@ -142,8 +143,9 @@ def convert_labels(
         check_layer(output, opts.force, opts.layer_lods, volume.files, opts.fragment_size,
                     sharded=opts.sharded, legacy=opts.legacy_mesh)  # fmt: skip
     else:
-        for path in outputs:  # every name is checked before the first file is written
-            check_output(path, opts.force, inputs=volume.files)
+        for n, path in enumerate(outputs):  # every name before the first file is written
+            # one folder: a file made there once shows the others can be too
+            check_output(path, opts.force, inputs=volume.files, probe=n == 0)
     # each label's surface is built when it is written (or post-processed): the
     # memory of the ones written is reused for the next
     meshes = list(surfaces.meshes.values()) if post.steps or writer.layer else None
@@ -181,22 +183,29 @@ def convert_labels(
             on_status=on_status,
             map_objects=layer_objects_on(opts, volume.source),
         )
+    if writer.layer:  # each label's mesh is the layer's object of that id
+        return [
+            ConvertResult(
+                volume, mesh, path, writer.name, False, surfaces[label] if post.steps else None
+            )
+            for label, mesh, path in zip(surfaces.labels, meshes, outputs, strict=True)
+        ]
+    progress("writing")
+
+    def write(n: int, path: Path) -> Path:
+        # in a worker thread: the label's mesh is built and written there, the
+        # kernels and the file leaving the interpreter to the next label's
+        mesh = meshes[n] if meshes is not None else surfaces.meshes[surfaces.labels[n]]
+        return write_mesh(mesh, path, format=writer.name, ascii=opts.ascii, force=opts.force)
+
+    written = threaded_in_order(write, enumerate(outputs), kernel_threads())
     results = []
-    for n, (label, path) in enumerate(zip(surfaces.labels, outputs, strict=True)):
+    for n, (label, path) in enumerate(zip(surfaces.labels, written, strict=True)):
         extracted = surfaces[label]
         mesh = meshes[n] if meshes is not None else extracted
-        if writer.layer:  # each label's mesh is the layer's object of that id
-            results.append(
-                ConvertResult(
-                    volume, mesh, path, writer.name, False, extracted if post.steps else None
-                )
-            )
-            continue
-        progress("writing")
-        written = write_mesh(mesh, path, format=writer.name, ascii=opts.ascii, force=opts.force)
         results.append(
             ConvertResult(
-                volume, mesh, written, writer.name, opts.ascii, extracted if post.steps else None
+                volume, mesh, path, writer.name, opts.ascii, extracted if post.steps else None
             )  # fmt: skip
         )
     return results

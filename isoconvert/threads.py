@@ -4,6 +4,10 @@ settings of a process that runs one command (:func:`prepare_process`)."""
 from __future__ import annotations
 
 import os
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
 
 from .errors import IsoconvertError
 
@@ -39,6 +43,38 @@ def kernel_threads() -> int:
             "unset it to use every CPU"
         )
     return min(threads, cpus)
+
+
+def threaded_in_order(
+    function: Callable[..., Any], arguments: Iterable[tuple], threads: int, window: int = 0
+) -> Iterator[Any]:
+    """``function(*args)`` for each tuple of ``arguments``, run by ``threads`` threads,
+    the results in order.
+
+    For work whose kernels and file writes leave the interpreter free. At most
+    ``window`` calls (default: twice the threads) are submitted at once, so an
+    ``arguments`` that builds each item when asked for holds only those in flight
+    (``Executor.map`` takes every argument first). When the caller stops early (an
+    error, an interrupt in the main thread), the calls not started are cancelled and
+    those running are waited for: none is left half done. One thread: called here.
+    """
+    if threads <= 1:
+        for args in arguments:
+            yield function(*args)
+        return
+    window = window or 2 * threads
+    pending: deque = deque()
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="isoconvert") as pool:
+        try:
+            for args in arguments:
+                pending.append(pool.submit(function, *args))
+                if len(pending) >= window:
+                    yield pending.popleft().result()
+            while pending:
+                yield pending.popleft().result()
+        finally:
+            for future in pending:
+                future.cancel()
 
 
 def prepare_process() -> None:

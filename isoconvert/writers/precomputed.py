@@ -58,9 +58,7 @@ from __future__ import annotations
 
 import contextlib
 import json
-from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -69,7 +67,7 @@ from ..atomic import atomic_folder
 from ..errors import FormatError, IsoconvertError, OutputError
 from ..geometry import normalized_grid
 from ..mesh import Mesh
-from ..threads import kernel_threads
+from ..threads import kernel_threads, threaded_in_order
 from ..units import meters_per_unit
 from ..volume import Volume
 from .precomputed_volume import volume_scale, write_chunks
@@ -364,8 +362,8 @@ def write_precomputed(
                 # objects side by side: the coarser levels' collapses are most of the
                 # work, and their kernels leave the interpreter free
                 threads = kernel_threads() if lods > 1 else 1
-                pool = stack.enter_context(ThreadPoolExecutor(max_workers=threads))
-                done = _in_order(pool, encode_object, arguments(), 2 * threads)
+                done = threaded_in_order(encode_object, arguments(), threads)
+                stack.callback(done.close)
             else:
                 done = map_objects(encode_object, arguments())
                 if hasattr(done, "close"):  # stops the work left when this fails
@@ -379,22 +377,6 @@ def write_precomputed(
         if spec is not None:
             _write_shards(work / "mesh", objects, spec)
     return folder
-
-
-def _in_order(pool: ThreadPoolExecutor, function, arguments, window: int):
-    """``function(*args)`` for each of ``arguments`` on ``pool``, in order, with at
-    most ``window`` submitted at once (``Executor.map`` takes every argument first)."""
-    pending: deque = deque()
-    try:
-        for args in arguments:
-            pending.append(pool.submit(function, *args))
-            if len(pending) >= window:
-                yield pending.popleft().result()
-        while pending:
-            yield pending.popleft().result()
-    finally:
-        for future in pending:
-            future.cancel()
 
 
 def encode_object(
