@@ -466,3 +466,32 @@ def test_a_signal_while_the_command_starts_is_one_line(name):
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in done.stderr
     assert lines[0] == f"isoconvert: interrupted ({name}) while starting; nothing was written"
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_signal_while_label_files_are_written_side_by_side(tmp_path, signum):
+    """Label files are written by two threads at once: a signal to the main thread
+    cancels the ones not started, waits for those being written, and leaves only
+    whole files, each the bytes of an uninterrupted run."""
+    i = np.arange(96) // 12
+    # 512 labels, 12-voxel cubes: hundreds of files to write
+    labels = (1 + i[:, None, None] * 64 + i[None, :, None] * 8 + i[None, None, :]).astype(np.uint16)
+    np.save(tmp_path / "labels.npy", labels)
+    reference = tmp_path / "reference"
+    reference.mkdir()
+    assert main(["convert", str(tmp_path / "labels.npy"), "--labels", "--smooth", "0", "-q",
+                 "-o", str(reference / "l.ply")]) == 0  # fmt: skip
+    out = tmp_path / "out"
+    out.mkdir()
+    proc = start(["convert", str(tmp_path / "labels.npy"), "--labels", "--smooth", "0", "-q",
+                  "-o", str(out / "l.ply")])  # fmt: skip
+    wait_until(proc, lambda: part_files(out), "a .part file in the output folder")
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 128 + signum, err.decode()
+    assert err.decode().strip().splitlines() == [interrupted_line(signum)]
+    written = list(out.iterdir())
+    assert part_files(out) == []
+    assert len(written) < len(list(reference.iterdir()))  # it was stopped part of the way
+    for path in written:
+        assert path.read_bytes() == (reference / path.name).read_bytes(), path.name
