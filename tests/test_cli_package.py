@@ -65,3 +65,29 @@ def test_the_commands_are_registered_once_each_on_the_one_app():
     visible = [n for n in group.list_commands(None) if not group.commands[n].hidden]
     # the order --help lists them in (as before the split)
     assert visible == ["convert", "check", "preview", "batch", "info", "formats", "methods"]
+
+
+def test_a_run_builds_and_imports_only_its_own_command():
+    """``isoconvert convert ...`` needs neither batch's module nor the other commands'
+    options; the help still lists every command."""
+    import subprocess
+    import sys
+
+    from typer.main import get_command
+
+    from isoconvert.cli import typer_app
+
+    only = get_command(typer_app("convert"))
+    assert only.list_commands(None) == ["convert"]
+    code = (
+        "import sys; from isoconvert.cli import main; "
+        "code = main(['convert', 'no-such-file.npy', '--level', '1', '-o', 'x.ply']); "
+        "print(code, 'isoconvert.cli.batch_cmd' in sys.modules)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.stdout.split() == ["1", "False"], done.stderr
+    assert "no-such-file.npy" in done.stderr  # the command did run: its one-line error
+    code = "from isoconvert.cli import main; main(['--help'])"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    for name in ("convert", "check", "preview", "batch", "info", "formats", "methods"):
+        assert f" {name} " in done.stdout, name

@@ -13,8 +13,9 @@ Its modules, each importing only those listed before it (so no circle):
 - ``display``: progress, the stage clock, notices and batch's table;
 - ``reports``: mesh reports printed or written, exit code 4;
 - ``convert_cmd``, ``batch_cmd``, ``inspect_cmds``: the commands, plain functions;
-- this ``__init__``: the typer ``app``, on which it registers the commands (in the
-  order ``--help`` lists them), ``main`` with its error handling and exit codes,
+- this ``__init__``: the typer application (:func:`typer_app`: every command in the
+  order ``--help`` lists them, or, for a run, only the command it names, whose module
+  alone is imported), ``main`` with its error handling and exit codes,
   the command-line pre-processing, and ``run`` (the console script).
 
 Exit codes: 0 success, 1 a problem with the input or output (one line on
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import importlib
 import os
 import sys
 from contextlib import redirect_stdout
@@ -36,10 +38,7 @@ import typer
 from .. import __version__
 from ..errors import IsoconvertError, one_line
 from . import display
-from .batch_cmd import batch
 from .coercion import plain_coercion
-from .convert_cmd import convert
-from .inspect_cmds import check, formats, info, methods, preview, warmup
 from .options import (
     EXIT_CHECK_FAILED,
     ExtractArgs,
@@ -104,21 +103,7 @@ class _Group(_HelpAsFlag, typer.core.TyperGroup):
         plain_coercion(self.params)
 
 
-app = typer.Typer(
-    name="isoconvert",
-    cls=_Group,
-    help="Turn scalar volumes and images (raw, NRRD, TIFF, Zarr, DICOM, NIfTI, MetaImage, NumPy, "
-    "PNG, JPEG) into isosurface meshes and contours (PLY, OBJ, OFF, VTP, STL, GLB, 3MF, SVG, "
-    "GeoJSON), and check and picture meshes.",
-    no_args_is_help=True,
-    pretty_exceptions_enable=False,
-    add_completion=False,
-    context_settings={"help_option_names": ["-h", "--help"]},
-)
-
-
-@app.callback(invoke_without_command=True)
-def _main(
+def _version_and_debug(
     version: Annotated[bool, _flag("--version", help="Show the version.")] = False,
     debug: Annotated[
         bool, _flag("--debug", help="Show tracebacks (may go anywhere on the line).")
@@ -129,15 +114,59 @@ def _main(
         raise typer.Exit()
 
 
-# The commands, in the order --help lists them.
-app.command(cls=_Command)(convert)
-app.command(cls=_Command)(check)
-app.command(cls=_Command)(preview)
-app.command(cls=_Command)(batch)
-app.command(cls=_Command)(info)
-app.command(cls=_Command, hidden=True)(warmup)
-app.command(cls=_Command)(formats)
-app.command(cls=_Command)(methods)
+#: The commands, in the order --help lists them: (module of this package, function, hidden).
+_COMMANDS = (
+    ("convert_cmd", "convert", False),
+    ("inspect_cmds", "check", False),
+    ("inspect_cmds", "preview", False),
+    ("batch_cmd", "batch", False),
+    ("inspect_cmds", "info", False),
+    ("inspect_cmds", "warmup", True),
+    ("inspect_cmds", "formats", False),
+    ("inspect_cmds", "methods", False),
+)
+
+
+def typer_app(only: str | None = None) -> typer.Typer:
+    """The typer application: every command, or only the one named ``only``.
+
+    A run needs only its own command: building the others' options (and importing
+    batch's module) costs every run some 40 ms, which ``only`` saves; the help and
+    an unknown command's message need them all (:data:`app`).
+    """
+    new = typer.Typer(
+        name="isoconvert",
+        cls=_Group,
+        help="Turn scalar volumes and images (raw, NRRD, TIFF, Zarr, DICOM, NIfTI, MetaImage, "
+        "NumPy, PNG, JPEG) into isosurface meshes and contours (PLY, OBJ, OFF, VTP, STL, GLB, "
+        "3MF, SVG, GeoJSON), and check and picture meshes.",
+        no_args_is_help=True,
+        pretty_exceptions_enable=False,
+        add_completion=False,
+        context_settings={"help_option_names": ["-h", "--help"]},
+    )
+    new.callback(invoke_without_command=True)(_version_and_debug)
+    for module, name, hidden in _COMMANDS:
+        if only is None or name == only:
+            function = getattr(importlib.import_module(f".{module}", __name__), name)
+            new.command(cls=_Command, hidden=hidden)(function)
+    return new
+
+
+def __getattr__(name: str):
+    if name == "app":  # every command, built when first asked for
+        globals()["app"] = built = typer_app()
+        return built
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _app_for(args: list[str]) -> typer.Typer:
+    """The application for a command line: only its command when it names one (the
+    group's own options are flags, so the first other word is the command)."""
+    word = next((a for a in args if not a.startswith("-")), None)
+    if word in {name for _, name, _ in _COMMANDS}:
+        return typer_app(word)
+    return typer_app()
 
 
 #: File names that a bare ``--report`` takes as its value (other names after it are
@@ -265,7 +294,7 @@ def _run_command(argv: list[str] | None) -> int:
     talk = _messages_kept_off(_output_streams(args))
     try:
         with talk:
-            result = app(args=args, prog_name="isoconvert", standalone_mode=False)
+            result = _app_for(args)(args=args, prog_name="isoconvert", standalone_mode=False)
         code = result if isinstance(result, int) else 0
         if code == 130:  # click turns Ctrl-C into exit code 130
             return _interrupted()
