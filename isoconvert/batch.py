@@ -80,6 +80,7 @@ class Job:
     options: dict = field(default_factory=dict)  # read options and flip
     estimate: int = 0  # bytes of memory it is expected to need
     name: str = ""  # the summary's name for the input (``input`` when empty)
+    layer: bool = False  # ``output`` is a precomputed layer (a folder) of the file's meshes
 
     def __post_init__(self) -> None:
         self.name = self.name or self.input
@@ -604,6 +605,7 @@ def plan(
     options: dict | None = None,
     raw_options: dict | None = None,
     labels: bool = False,
+    layer: bool = False,
 ) -> tuple[list[Job], list[Outcome]]:
     """Jobs for the found volumes; outcomes for those skipped because done.
 
@@ -620,7 +622,9 @@ def plan(
     Several levels give each file one job per level, ``NAME_levelL.ply`` (a
     mapping entry's level overrides them with its one). With ``labels`` a file
     needs no level: its job writes ``NAME_labelL.ply`` per label (its output
-    counts as existing when one of those does).
+    counts as existing when one of those does). With ``layer`` (``suffix`` empty) each
+    file's output is a precomputed layer, a folder: its labels' meshes, or its one
+    level's as object 1.
     """
     levels = list(level) if isinstance(level, list | tuple) else [level]
     out_dir = Path(out_dir)
@@ -655,7 +659,7 @@ def plan(
         if labels:
             file_levels = [("labels", output)]
         for job_level, output in file_levels:
-            _add_job(f, output, job_level, job_options, jobs, done, skip_existing, force)
+            _add_job(f, output, job_level, job_options, jobs, done, skip_existing, force, layer)
     return jobs, done
 
 
@@ -668,6 +672,7 @@ def _add_job(
     done: list[Outcome],
     skip_existing: bool,
     force: bool,
+    layer: bool = False,
 ) -> None:
     """The job converting ``f`` at ``job_level`` into ``output``, or the outcome
     saying why there is none (no level, output there)."""
@@ -682,7 +687,7 @@ def _add_job(
         )
         return
     exists, shown = output.exists(), output
-    if job_level == "labels":  # the job writes NAME_labelL.ply files
+    if job_level == "labels" and not layer:  # the job writes NAME_labelL.ply files
         shown = output.with_name(f"{output.stem}_label*{output.suffix}")
         exists = any(output.parent.glob(f"{globlib.escape(output.stem)}_label*{output.suffix}"))
     if exists and skip_existing:
@@ -699,7 +704,7 @@ def _add_job(
         )
         return
     estimate = MEMORY_FACTOR * f.size + MEMORY_BASE
-    jobs.append(Job(f.spec, str(output), job_level, job_options, estimate, f.name))
+    jobs.append(Job(f.spec, str(output), job_level, job_options, estimate, f.name, layer))
 
 
 def drop_outputs(
@@ -734,7 +739,9 @@ def drop_outputs(
         names.add(os.path.realpath(out))
         if previews:
             names.add(os.path.realpath(out.with_suffix(".png")))
-        if isinstance(item, Job) and item.level == "labels":
+        if isinstance(item, Job) and item.layer:  # the layer's files
+            patterns.append(globlib.escape(os.path.realpath(out)) + os.sep + "*")
+        elif isinstance(item, Job) and item.level == "labels":
             stem = os.path.realpath(out.with_suffix(""))
             patterns.append(globlib.escape(stem) + "_label*" + out.suffix)
             if previews:
@@ -923,7 +930,10 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
         level=None if labels else float(results[0].mesh.info["level"]),
         vertices=sum(r.mesh.n_vertices for r in results),
         cells=sum(r.mesh.n_cells for r in results),
-        message=f"{len(results)} label surfaces" if labels else "",
+        message=(f"a layer of {len(results)} " if job.layer else f"{len(results)} ")
+        + ("label surfaces" if labels else "isosurface")
+        if labels or job.layer
+        else "",
     )
     notes = [outcome.message] if outcome.message else []
     checks: dict = {}

@@ -405,9 +405,15 @@ def test_convert_labels_writes_a_layer_cloud_volume_reads(tmp_path, capsys):
     assert main(["convert", str(inside), "--labels", "-o", str(layer), "--format", "precomputed",
                  "-f"]) == 1  # fmt: skip
     assert "holds the input" in capsys.readouterr().err and inside.exists()
-    assert main(["batch", str(path), "-o", str(tmp_path / "b"), "--format", "precomputed",
-                 "--labels"]) != 0  # fmt: skip
-    assert "convert --labels" in capsys.readouterr().err
+    # batch, which writes layers too (tests/test_issue25_batch_layers.py), refuses it alike
+    holder = tmp_path / "atlas"  # batch's layer of holder/atlas.nrrd in tmp_path
+    holder.mkdir()
+    (holder / "atlas.nrrd").write_bytes(path.read_bytes())
+    summary = tmp_path / "s.json"
+    assert main(["batch", str(holder / "atlas.nrrd"), "-o", str(tmp_path), "--format",
+                 "precomputed", "--labels", "-f", "--summary", str(summary)]) == 1  # fmt: skip
+    assert "holds the input" in summary.read_text()
+    assert (holder / "atlas.nrrd").read_bytes() == path.read_bytes()
 
 
 def test_a_real_label_volume_becomes_a_layer(tmp_path):

@@ -17,6 +17,7 @@ from .options import (
     ExtractArgs,
     ForceOpt,
     LabelArgs,
+    LayerArgs,
     LevelOpt,
     MemoryArgs,
     MeshArgs,
@@ -78,6 +79,7 @@ def batch(
     post: PostArgs = PostArgs(),
     memory: MemoryArgs = MemoryArgs(),
     labels: LabelArgs = LabelArgs(),
+    layer: LayerArgs = LayerArgs(),
 ) -> None:
     """Convert many volumes: files, folders (--recursive) and globs, in parallel."""
     _quiet_third_party()
@@ -87,16 +89,25 @@ def batch(
 
     required = parse_requirements(require)
     writer = WRITERS.get(mesh.format or "ply")
-    if writer.layer:
+    if writer.layer and previews:
         raise FormatError(
-            f"batch writes a mesh file per volume; {writer.name} layers come from "
-            "convert --labels, one per label volume"
+            f"--previews pictures mesh files; a {writer.name} layer is viewed in "
+            "Neuroglancer: leave out --previews"
+        )
+    if writer.layer and level and len(level) > 1:
+        raise FormatError(
+            f"batch writes one {writer.name} layer per volume, of its labels or of one "
+            "--level; for several levels in one layer, convert each volume with --level "
+            "given once per level"
         )
     check_attributes(writer, "--format", normals=mesh.normals, labels=labels.single_file)
     # the raw layout goes to raw files only (plan); every other option to every file
     options = _convert_options(
-        read, extract, mesh, post, labels, level, raw_layout=False, format=writer.name
+        read, extract, mesh, post, labels, layer, level, raw_layout=False, format=writer.name
     )
+    from ..convert import refuse_layer_options
+
+    refuse_layer_options(options, writer)  # --lods without a layer: once, not per file
     by_label = options.labels is not None
     batching.check_jobs(jobs)
     if previews:  # before the work: without a renderer there would be no pictures
@@ -137,13 +148,14 @@ def batch(
     work, outcomes = batching.plan(
         found,
         out_dir,
-        writer.suffixes[0],
+        writer.suffixes[0] if writer.suffixes else "",  # a layer: a folder per volume
         numeric_level,
         rules,
         skip_existing=skip_existing,
         force=force,
         raw_options=read.raw_layout(),
         labels=by_label,
+        layer=writer.layer,
     )
     # a batch into its own input folder meets its earlier outputs: not inputs skipped
     written = [out_dir / "index.html"] if previews else []

@@ -17,20 +17,16 @@ from .options import (
     ExamplesOpt,
     ExtractArgs,
     ForceOpt,
-    FragmentSizeOpt,
     LabelArgs,
-    LegacyMeshOpt,
+    LayerArgs,
     LevelOpt,
-    LodsOpt,
     MemoryArgs,
     MeshArgs,
     PostArgs,
     QuietOpt,
     ReadArgs,
     RequireOpt,
-    ShardedOpt,
     VerboseOpt,
-    WithVolumeOpt,
     _convert_options,
     _grouped,
 )
@@ -77,11 +73,7 @@ def convert(
     post: PostArgs = PostArgs(),
     memory: MemoryArgs = MemoryArgs(),
     labels: LabelArgs = LabelArgs(),
-    lods: LodsOpt = None,
-    fragment_size: FragmentSizeOpt = None,
-    sharded: ShardedOpt = False,
-    legacy_mesh: LegacyMeshOpt = False,
-    with_volume: WithVolumeOpt = False,
+    layer: LayerArgs = LayerArgs(),
 ) -> None:
     """Extract an isosurface from a volume and write it as a mesh."""
     _quiet_third_party()
@@ -97,15 +89,11 @@ def convert(
         mesh,
         post,
         labels,
+        layer,
         level,
         force=force,
         values=values,
         blocks=memory.blocks(),
-        lods=lods,
-        fragment_size=fragment_size,
-        sharded=sharded,
-        legacy_mesh=legacy_mesh,
-        with_volume=with_volume,
     )
     by_label = options.labels is not None
     if not by_label and not level:

@@ -467,6 +467,56 @@ class LabelArgs:
         return (wanted or ()) if labels else None
 
 
+@dataclass(frozen=True)
+class LayerArgs:
+    """Neuroglancer precomputed layers (``--format precomputed``)."""
+
+    lods: Annotated[
+        int | None,
+        typer.Option(
+            help="Levels of detail of --format precomputed: 1 is the mesh as extracted, "
+            "level k decimated to within 2^(k-1) voxels (needs isoconvert\\[simplify]); "
+            "default 3 (1 with --legacy-mesh).",
+        ),
+    ] = None
+    fragment_size: Annotated[
+        float | None,
+        typer.Option(
+            help="Cut each object of --format precomputed into fragments of this many voxels "
+            "a side (octree nodes a viewer loads one by one); default: one fragment per object "
+            "and level of detail.",
+        ),
+    ] = None
+    sharded: Annotated[
+        bool,
+        _flag(
+            "--sharded",
+            help="Store --format precomputed objects in shard files (neuroglancer_uint64_"
+            "sharded_v1) instead of two files each: for layers of many objects.",
+        ),
+    ] = False
+    legacy_mesh: Annotated[
+        bool,
+        _flag(
+            "--legacy-mesh",
+            help="Write --format precomputed meshes in the legacy single-resolution format "
+            "(neuroglancer_legacy_mesh) for tools that read no other: one level, no shards.",
+        ),
+    ] = False
+    with_volume: Annotated[
+        bool,
+        _flag(
+            "--with-volume",
+            help="Also write the labels themselves into the --format precomputed layer "
+            "(compressed_segmentation chunks), so that one folder opens with voxels and meshes.",
+        ),
+    ] = False
+
+    def options(self) -> dict:
+        """The ConvertOptions fields of these options."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
 #: The groups, and the help panel of their options (unless an option names its own).
 _GROUPS = {
     ReadArgs: "Input",
@@ -475,6 +525,7 @@ _GROUPS = {
     PostArgs: "Post-processing",
     MemoryArgs: "Large volumes",
     LabelArgs: "Labels",
+    LayerArgs: "Output",
 }
 
 
@@ -526,72 +577,13 @@ def _grouped(*omit: str):
     return decorate
 
 
-#: convert's levels of detail of --format precomputed (batch writes no layers)
-LodsOpt = Annotated[
-    int | None,
-    typer.Option(
-        help="Levels of detail of --format precomputed: 1 is the mesh as extracted, "
-        "level k decimated to within 2^(k-1) voxels (needs isoconvert\\[simplify]); "
-        "default 3 (1 with --legacy-mesh).",
-        rich_help_panel="Output",
-    ),
-]
-
-
-#: convert's octree fragments of --format precomputed
-FragmentSizeOpt = Annotated[
-    float | None,
-    typer.Option(
-        help="Cut each object of --format precomputed into fragments of this many voxels "
-        "a side (octree nodes a viewer loads one by one); default: one fragment per object "
-        "and level of detail.",
-        rich_help_panel="Output",
-    ),
-]
-
-
-#: convert's shard files of --format precomputed
-ShardedOpt = Annotated[
-    bool,
-    _flag(
-        "--sharded",
-        help="Store --format precomputed objects in shard files (neuroglancer_uint64_"
-        "sharded_v1) instead of two files each: for layers of many objects.",
-        rich_help_panel="Output",
-    ),
-]
-
-
-#: convert's legacy single-resolution meshes of --format precomputed
-LegacyMeshOpt = Annotated[
-    bool,
-    _flag(
-        "--legacy-mesh",
-        help="Write --format precomputed meshes in the legacy single-resolution format "
-        "(neuroglancer_legacy_mesh) for tools that read no other: one level, no shards.",
-        rich_help_panel="Output",
-    ),
-]
-
-
-#: convert's label voxels in a --format precomputed layer
-WithVolumeOpt = Annotated[
-    bool,
-    _flag(
-        "--with-volume",
-        help="Also write the labels themselves into the --format precomputed layer "
-        "(compressed_segmentation chunks), so that one folder opens with voxels and meshes.",
-        rich_help_panel="Output",
-    ),
-]
-
-
 def _convert_options(
     read: ReadArgs,
     extract: ExtractArgs,
     mesh: MeshArgs,
     post: PostArgs,
     labels: LabelArgs,
+    layer: LayerArgs,
     level,
     *,
     raw_layout: bool = True,
@@ -624,6 +616,7 @@ def _convert_options(
         single_file=labels.single_file,
         background=labels.background,
         label_smoothing=post.smooth if chosen is not None else None,
+        **layer.options(),
     )
     return replace(options, **changes)
 
