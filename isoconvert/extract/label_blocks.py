@@ -63,6 +63,9 @@ from .prepare import kernel_type
 #: the other way, one for a vertex's stencil, and three to spare.
 HALO_MARGIN = 8
 
+#: Quads renumbered at once by merge_slabs (the temporary stays in cache).
+_PIECE = 1 << 16
+
 #: Bits of a vertex key taken by the sheet (a dual cell has at most 12 sheets).
 SHEET_BITS = 4
 
@@ -173,12 +176,13 @@ class LabelSlab:
 
 @dataclass
 class MergedNet:
-    """The whole volume's net, as ``_native.label_net`` gives it."""
+    """The whole volume's net, as ``_native.label_net`` gives it, but for
+    ``quad_labels``: its ``pairs`` once per quad, ``(Q, 2)``, not per triangle."""
 
     positions: np.ndarray
     dual_cells: np.ndarray
     corners: np.ndarray
-    pairs: np.ndarray
+    quad_labels: np.ndarray
     sides: np.ndarray
     split: int
     unresolved: int
@@ -400,15 +404,20 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
         refs.append(corners)
         slab.corners = None  # each slab's arrays go once merged: the peak holds one copy
     order = np.argsort(_take(slabs, "quad_keys"), kind="stable")
-    refs = np.concatenate(refs)[order]
+    whole = np.concatenate(refs)
+    del refs
+    corners = whole[order]
+    del whole
     turned = _take(slabs, "turned")[order]
     pairs = _take(slabs, "pairs")[order]
     # vertices numbered by their first quad corner, quads not yet turned
     nv = int(starts[-1])
-    rank = _native.first_use_numbering(refs.reshape(-1), nv)
+    rank = _native.first_use_numbering(corners.reshape(-1), nv)
     if nv and rank.min() < 0:
         raise IsoconvertError("internal error: a label slab owns a vertex of no quad")
-    corners = rank[refs]
+    for a in range(0, len(corners), _PIECE):  # renumbered in place: no second copy
+        piece = corners[a : a + _PIECE]
+        piece[:] = rank[piece]
     corners[turned] = corners[turned, ::-1]
     positions = np.empty((nv, 3))
     positions[rank] = _take(slabs, "positions")
@@ -423,7 +432,7 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
         positions=positions,
         dual_cells=dual_cells,
         corners=corners,
-        pairs=np.repeat(pairs, 2, axis=0),
+        quad_labels=pairs,
         sides=sides,
         split=sum(s.split for s in slabs),
         unresolved=sum(s.unresolved for s in slabs),

@@ -84,6 +84,7 @@ start off their dual cell's centre (see above).
 from __future__ import annotations
 
 import copy
+import functools
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
@@ -186,7 +187,7 @@ class LabelMeshes:
     def __init__(
         self,
         net: _Net,
-        boundary_labels: np.ndarray,
+        quad_labels: np.ndarray,
         dual_cells: np.ndarray,
         split_vertices: int = 0,
         unresolved: int = 0,
@@ -197,7 +198,7 @@ class LabelMeshes:
         self._meshes: dict[int, Mesh] = {}
         self._maps: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._combined: Mesh | None = None
-        self.boundary_labels = boundary_labels
+        self._quad_labels = quad_labels  # (Q, 2): boundary_labels of each quad's two triangles
         self.dual_cells = dual_cells
         self.split_vertices = split_vertices
         self.unresolved = unresolved
@@ -206,6 +207,12 @@ class LabelMeshes:
         self.meshes = _PerLabel(self, 0)
         self.vertex_map = _PerLabel(self, 1)
         self.face_map = _PerLabel(self, 2)
+
+    @functools.cached_property
+    def boundary_labels(self) -> np.ndarray:
+        # built when asked for (--single-file): one row per triangle, two per quad,
+        # twice the memory of the quads' own (80 MB on a 512^3 atlas)
+        return np.repeat(self._quad_labels, 2, axis=0)
 
     @property
     def combined(self) -> Mesh:
@@ -355,8 +362,8 @@ def label_surfaces(
         net = _net_in_slabs(volume, labels, background, options, reverse, blocks, itemsize,
                             on_status)  # fmt: skip
         wanted = net.wanted
-        positions, dual_cells, corners, pairs, sides = (
-            net.positions, net.dual_cells, net.corners, net.pairs, net.sides)  # fmt: skip
+        positions, dual_cells, corners, quad_labels, sides = (
+            net.positions, net.dual_cells, net.corners, net.quad_labels, net.sides)  # fmt: skip
         split, unresolved, outside, vmin, vmax = (
             net.split, net.unresolved, net.outside, net.vmin, net.vmax)  # fmt: skip
     else:
@@ -379,6 +386,7 @@ def label_surfaces(
             )
         )
         del samples
+        quad_labels = pairs[0::2]  # the kernel's rows are per triangle, two alike per quad
     if len(corners) == 0:
         raise LevelError(f"{volume.source}: no label surface (every sample is background)")
     if (split or unresolved or outside) and on_status:
@@ -408,7 +416,7 @@ def label_surfaces(
     )
     return LabelMeshes(
         net,
-        pairs,
+        quad_labels,
         dual_cells,
         split_vertices=int(split),
         unresolved=int(unresolved),
