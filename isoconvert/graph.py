@@ -52,6 +52,8 @@ def mix64(x: np.ndarray) -> np.ndarray:
 def row_hashes(rows: np.ndarray) -> np.ndarray:
     """(N,) uint64: one :func:`mix64` hash of each row of a (N, k) array of 64-bit
     values (equal rows, equal hashes)."""
+    if not len(rows):
+        return np.zeros(0, dtype=np.uint64)
     bits = np.ascontiguousarray(rows).view(np.uint64).reshape(len(rows), -1)
     h = mix64(bits[:, 0])
     for col in range(1, bits.shape[1]):
