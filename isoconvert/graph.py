@@ -49,6 +49,18 @@ def mix64(x: np.ndarray) -> np.ndarray:
     return x
 
 
+def row_hashes(rows: np.ndarray) -> np.ndarray:
+    """(N,) uint64: one :func:`mix64` hash of each row of a (N, k) array of 64-bit
+    values (equal rows, equal hashes)."""
+    if not len(rows):
+        return np.zeros(0, dtype=np.uint64)
+    bits = np.ascontiguousarray(rows).view(np.uint64).reshape(len(rows), -1)
+    h = mix64(bits[:, 0])
+    for col in range(1, bits.shape[1]):
+        h = mix64(h ^ bits[:, col])
+    return h
+
+
 def row_groups(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Group equal rows of a (N, k) array of 64-bit values.
 
@@ -69,9 +81,7 @@ def row_groups(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if n == 0:
         return np.zeros(0, np.int64), np.zeros(0, bool)
     bits = np.ascontiguousarray(rows).view(np.uint64).reshape(n, -1)
-    h = mix64(bits[:, 0])
-    for col in range(1, bits.shape[1]):
-        h = mix64(h ^ bits[:, col])
+    h = row_hashes(bits)
     order = np.argsort(h, kind="quicksort")
     s = bits[order]
     same = (s[1:] == s[:-1]).all(axis=1)

@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 #include <vector>
@@ -94,6 +95,76 @@ inline double cover_radius(const Vec &p0, const Vec &p1, const Vec &p2) {
   }
   return std::isfinite(r) ? r : half_longest;
 }
+
+// The distance and nearest triangle of the midpoints measured while one
+// triangle is certified. Neighbouring pieces share their edges, so without it
+// nearly every midpoint below the first split is measured twice: a piece's
+// corners and midpoints are computed from its parent's by the same operations
+// whichever piece asks, so equal points are equal bits and a point's entry is
+// what measuring it again would give. Open addressing over the coordinate
+// bits; `generation` empties the table for the next triangle without a pass.
+class MidpointMemo {
+ public:
+  // A triangle split `depth` times has (2^depth + 1)(2^depth + 2) / 2 points:
+  // room for twice as many, up to 2^16 slots (a deeper split than that
+  // measures its further points again, which gives the same answers).
+  explicit MidpointMemo(int depth) {
+    const int d = std::min(depth, 7);
+    const i64 points = ((i64(1) << d) + 1) * ((i64(1) << d) + 2) / 2;
+    i64 size = 16;
+    while (size < 2 * points) size *= 2;
+    slots_.resize(size_t(size));
+    mask_ = std::uint64_t(size - 1);
+  }
+
+  void clear() {
+    ++generation_;
+    used_ = 0;
+  }
+
+  // The entry of `m`, and whether it was there already (else the caller fills it).
+  bool find(const Vec &m, double *&distance, i64 *&nearest) {
+    std::uint64_t key[3];
+    std::memcpy(key, &m, sizeof key);
+    std::uint64_t h = key[0] * 0x9E3779B97F4A7C15ull;
+    h = (h ^ key[1] ^ (h >> 29)) * 0xBF58476D1CE4E5B9ull;
+    h = (h ^ key[2] ^ (h >> 32)) * 0x94D049BB133111EBull;
+    for (std::uint64_t i = (h ^ (h >> 31)) & mask_;; i = (i + 1) & mask_) {
+      Slot &s = slots_[i];
+      if (s.generation != generation_) {
+        if (2 * used_ >= slots_.size()) {  // full: measured, not kept
+          distance = &spare_.distance;
+          nearest = &spare_.nearest;
+          return false;
+        }
+        ++used_;
+        s.generation = generation_;
+        std::memcpy(s.key, key, sizeof key);
+        distance = &s.distance;
+        nearest = &s.nearest;
+        return false;
+      }
+      if (std::memcmp(s.key, key, sizeof key) == 0) {
+        distance = &s.distance;
+        nearest = &s.nearest;
+        return true;
+      }
+    }
+  }
+
+ private:
+  struct Slot {
+    std::uint64_t key[3];
+    double distance;
+    i64 nearest;
+    std::uint64_t generation = 0;
+  };
+  std::vector<Slot> slots_;
+  Slot spare_;
+  size_t used_ = 0;
+  std::uint64_t mask_ = 0;
+  std::uint64_t generation_ = 0;
+};
 
 struct Grid {
   Vec origin{};
@@ -236,7 +307,9 @@ class TriangleGrid {
         int level;
       };
       std::vector<Piece> stack;
+      MidpointMemo memo(depth);
       for (i64 f = begin; f < end; ++f) {
+        memo.clear();
         Piece top;
         for (int q = 0; q < 3; ++q) {
           const double *c = v + 3 * t[3 * f + q];
@@ -266,11 +339,13 @@ class TriangleGrid {
           for (int q = 0; q < 3; ++q) {
             const i64 g = piece.near[q];
             if (g < 0 || (q > 0 && g == piece.near[0]) || (q > 1 && g == piece.near[1])) continue;
+            // a corner past the bound rules this triangle out (its value is then
+            // never used: only a convex bound within the bound certifies)
             double most = 0.0;
-            for (int k = 0; k < 3; ++k) {
+            for (int k = 0; k < 3 && std::sqrt(most) <= bound; ++k) {
               most = std::max(most, triangle_sq(piece.p[k], corner(g, 0), corner(g, 1), corner(g, 2)));
             }
-            convex = std::min(convex, std::sqrt(most));
+            if (std::sqrt(most) <= bound) convex = std::min(convex, std::sqrt(most));
           }
           if (convex <= bound) {
             worst = std::max(worst, convex);
@@ -287,7 +362,15 @@ class TriangleGrid {
           for (int q = 0; q < 3; ++q) {
             const Vec &a = piece.p[q], &b = piece.p[(q + 1) % 3];
             m[q] = {0.5 * (a.x + b.x), 0.5 * (a.y + b.y), 0.5 * (a.z + b.z)};
-            dm[q] = std::sqrt(nearest_sq(m[q], nm[q]));
+            double *known_distance;
+            i64 *known_nearest;
+            if (memo.find(m[q], known_distance, known_nearest)) {
+              dm[q] = *known_distance;
+              nm[q] = *known_nearest;
+            } else {
+              dm[q] = *known_distance = std::sqrt(nearest_sq(m[q], nm[q]));
+              *known_nearest = nm[q];
+            }
             if (dm[q] > bound) {
               status = 1;
               worst = std::max(worst, dm[q]);

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..errors import IsoconvertError
 from ..geometry import flat_triangles
-from ..graph import connected_components, row_groups, topology
+from ..graph import connected_components, row_groups, row_hashes, topology
 from ..mesh import Mesh
 from ..threads import kernel_threads
 
@@ -179,6 +179,7 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
     # the library's limit (float32; 1e308 would be inf there, which it takes badly)
     limit = _FIRST_LIMIT * radius if max_error is not None else float(np.finfo(np.float32).max)
     guard = _TopologyGuard(vertices, cells)
+    input_rows = _InputRows(cells)
     input_grid = TriangleGrid(vertices, cells, radius) if max_error is not None else None
     certified = Certified()  # the result's triangles certified onto the input so far
     # what is wrong with the input stays as it is: collapses never touch it
@@ -222,13 +223,18 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
                 limit *= min(0.5, 0.9 * float(max_error) / deviation) if deviation < np.inf else 0.5
             continue
         # every point of the input within the bound of the result, not only its vertices
-        spread, failed = within_bound(vertices, cells, output_grid, out, bound, distance)
+        kept, still = input_rows.shared(out)
+        spread, failed = within_bound(
+            vertices, cells, output_grid, out, bound, distance, shared=still
+        )
         if failed.any():
             locked |= guard.around(_vertices_of(cells[failed], len(vertices)))
             continue
         # and every point of the result within the bound of the input (triangles
         # certified in an earlier collapse stay so: the input does not change)
-        surface, failed = within_bound(vertices, out, input_grid, cells, bound, known=certified)
+        surface, failed = within_bound(
+            vertices, out, input_grid, cells, bound, known=certified, shared=kept
+        )
         if not failed.any():
             break
         # lock the input the failing triangles replaced (the input vertices nearest
@@ -449,6 +455,7 @@ def within_bound(
     bound: float,
     corner_distance: np.ndarray | None = None,
     known: Certified | None = None,
+    shared: np.ndarray | None = None,
 ) -> tuple[float, np.ndarray]:
     """Whether every point of ``triangles`` lies within ``bound`` of the surface
     of ``onto`` (both over ``vertices``), certified triangle by triangle.
@@ -483,6 +490,9 @@ def within_bound(
     known : Certified or None
         Triangles certified before against the same ``onto`` (skipped), which
         gains those certified now.
+    shared : (T,) bool or None
+        Which of ``triangles`` are also triangles of ``onto`` (as vertex sets),
+        when known already (see :class:`_InputRows`); None: found here.
 
     Returns
     -------
@@ -493,7 +503,7 @@ def within_bound(
         The triangles not certified within ``bound``.
     """
     failed = np.zeros(len(triangles), dtype=bool)
-    skip = _rows_in(triangles, onto)
+    skip = _rows_in(triangles, onto) if shared is None else shared.copy()
     if known is not None and len(known.rows):
         skip |= _rows_in(triangles, known.rows)
     fresh = np.flatnonzero(~skip)
@@ -535,6 +545,58 @@ def _vertices_of(triangles: np.ndarray, n: int) -> np.ndarray:
     used = np.zeros(n, dtype=bool)
     used[triangles.reshape(-1)] = True
     return used
+
+
+class _InputRows:
+    """The input's triangles as vertex sets, hashed once per decimation: which
+    triangles a collapse kept comes from looking up the result's few hashes
+    instead of sorting the whole input again after every collapse.
+
+    Parameters
+    ----------
+    cells : (C, 3) int64
+        The input's triangles.
+    """
+
+    def __init__(self, cells: np.ndarray) -> None:
+        self.rows = np.sort(cells, axis=1).astype(np.int64, copy=False)
+        self.hashes = row_hashes(self.rows)
+        self.sorted_hashes = np.sort(self.hashes)
+
+    def shared(self, out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The triangles ``out`` and the input have in common (as vertex sets).
+
+        Parameters
+        ----------
+        out : (C', 3) int64
+
+        Returns
+        -------
+        kept : (C',) bool
+            Which of ``out`` are input triangles.
+        still : (C,) bool
+            Which input triangles are in ``out``.
+        """
+        rows = np.sort(out, axis=1).astype(np.int64, copy=False)
+        hashes = row_hashes(rows)
+        # equal rows have equal hashes, so rows match only among those whose
+        # hash the other side has; :func:`_rows_in` settles those exactly
+        may = _member(self.sorted_hashes, hashes)
+        may_input = _member(np.sort(hashes[may]), self.hashes)
+        kept = np.zeros(len(out), dtype=bool)
+        still = np.zeros(len(self.rows), dtype=bool)
+        if may.any():
+            kept[may] = _rows_in(rows[may], self.rows[may_input])
+            still[may_input] = _rows_in(self.rows[may_input], rows[may])
+        return kept, still
+
+
+def _member(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """(K,) bool: which of ``keys`` are among ``sorted_keys`` (ascending)."""
+    if not len(sorted_keys):
+        return np.zeros(len(keys), dtype=bool)
+    at = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
+    return sorted_keys[at] == keys
 
 
 def _rows_in(out: np.ndarray, cells: np.ndarray) -> np.ndarray:
