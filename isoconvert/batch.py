@@ -930,10 +930,7 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
         level=None if labels else float(results[0].mesh.info["level"]),
         vertices=sum(r.mesh.n_vertices for r in results),
         cells=sum(r.mesh.n_cells for r in results),
-        message=(f"a layer of {len(results)} " if job.layer else f"{len(results)} ")
-        + ("label surfaces" if labels else "isosurface")
-        if labels or job.layer
-        else "",
+        message=_made(len(results), labels, job.layer) if labels or job.layer else "",
     )
     notes = [outcome.message] if outcome.message else []
     checks: dict = {}
@@ -962,6 +959,13 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
     outcome.message = "; ".join(notes)
     outcome.seconds = time.perf_counter() - start
     return outcome
+
+
+def _made(count: int, labels: bool, layer: bool) -> str:
+    """What a file's job made, for its summary row: "40 label surfaces", "a layer of
+    1 isosurface"."""
+    what = f"{count} label surface{'s' if count != 1 else ''}" if labels else "1 isosurface"
+    return f"a layer of {what}" if layer else what
 
 
 def _run_one_dict(job: dict, settings: BatchSettings) -> dict:
