@@ -9,7 +9,7 @@ import pytest
 import trimesh
 from conftest import ball, dataset, edge_use
 
-from isoconvert import extract, read_volume
+from isoconvert import Mesh, extract, read_volume
 from isoconvert.errors import IsoconvertError
 from isoconvert.report import check_mesh
 from isoconvert.volume import Volume
@@ -210,3 +210,17 @@ def test_the_report_gives_the_certified_bound_and_trimesh_agrees(tmp_path):
     measured = two_sided_distances(mesh, read_mesh(out), n=20_000)
     assert max(measured) <= 0.7 + 1e-6  # the file stores float32
     assert all(m <= c + 1e-6 for m, c in zip(measured, certified, strict=True))
+
+
+@pytest.mark.parametrize("n_vertices", [0, 5])
+@pytest.mark.parametrize(
+    "kwargs", [{"reduction": 0.5}, {"max_error": 1.0}, {"reduction": 0.5, "max_error": 1.0}]
+)
+def test_a_mesh_without_triangles_is_its_own_decimation(n_vertices, kwargs):
+    pytest.importorskip("meshoptimizer")
+    mesh = Mesh(np.random.default_rng(0).random((n_vertices, 3)), np.zeros((0, 3), np.int64))
+    result = decimate(mesh, **kwargs)
+    assert result.cells.shape == (0, 3) and len(result.vertices) == 0  # no vertex is used
+    record = result.info["decimation"]
+    assert record["triangles_before"] == record["triangles_after"] == 0
+    assert record["attempts"] == 0 and record["locked_vertices"] == 0

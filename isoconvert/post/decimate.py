@@ -190,7 +190,8 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
     bound = None if max_error is None else float(max_error)
     out = cells
     library_error = 0.0
-    while attempts < _MAX_ATTEMPTS:
+    # no triangles: nothing to collapse or to bound (the input is the answer)
+    while attempts < _MAX_ATTEMPTS and n_cells:
         attempts += 1
         out, library_error = simplify(indices, positions, locked, target, limit, options)
         new_problems = guard.new_problems(out)
