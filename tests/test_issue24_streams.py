@@ -54,6 +54,9 @@ def test_a_stream_without_format_is_one_line_and_writes_nothing(tmp_path, stream
     err = run.stderr.decode()
     assert err.count("\n") == 1 and "give --format" in err and "Traceback" not in err
     assert list(tmp_path.iterdir()) == []
+    # the formats it offers are those a stream can hold: a layer is a folder
+    offered = err.rsplit("(", 1)[1].split(")")[0].split(", ")
+    assert "ply" in offered and "precomputed" not in offered
 
 
 def test_convert_piped_into_a_reader_gives_the_same_mesh_and_report(tmp_path):

@@ -338,7 +338,8 @@ def output_format(path: str | Path, format: str | None = None) -> Writer:
     if output_stream(path) is not None and not Path(path).suffix:
         raise FormatError(
             f"{path}: a stream has no extension to tell the format; give --format "
-            f"({', '.join(WRITERS.names())})"
+            # a layer is a folder: no stream holds one
+            f"({', '.join(n for n, w in WRITERS.items() if not w.layer)})"
         )
     suffix = Path(path).suffix.lower()
     found = WRITERS.by_suffix(suffix)
