@@ -505,6 +505,29 @@ def test_batch_on_a_cluster_is_byte_identical(dask_processes, tmp_path):
         assert (tmp_path / "there" / name).read_bytes() == (tmp_path / "here" / name).read_bytes()
 
 
+def test_batch_layers_on_a_cluster_are_byte_identical(dask_processes, tmp_path):
+    """batch --format precomputed with --scheduler: each volume's layer written by a
+    worker process, the same folder as here."""
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    for i in range(2):
+        np.save(inputs / f"a{i}.npy", _atlas(seed=4 + i))
+    layer = ["--labels", "--format", "precomputed", "--lods", "2", "-q"]
+    here = _cli("batch", inputs, "-o", tmp_path / "here", "--jobs", 1, *layer)
+    assert here.returncode == 0, here.stderr
+    there = _cli("batch", inputs, "-o", tmp_path / "there", "--scheduler", dask_processes, *layer)
+    assert there.returncode == 0, there.stderr
+
+    def files(folder: Path) -> dict[str, bytes]:
+        return {
+            str(f.relative_to(folder)): f.read_bytes() for f in folder.rglob("*") if f.is_file()
+        }
+
+    made = files(tmp_path / "here")
+    assert {"a0/info", "a1/info", "a0/mesh/info"} <= set(made)
+    assert files(tmp_path / "there") == made
+
+
 def _atlas(shape=(20, 18, 40), cells=6, seed=4) -> np.ndarray:
     """(Z, Y, X) uint16 labels: nearest of a few random seeds, background outside a ball."""
     rng = np.random.default_rng(seed)
