@@ -462,7 +462,7 @@ struct NetResult {
   Vec<i64> dual_cells;    // (V,)
   Vec<u8> sheets;         // (V,): which sheet of its dual cell (numbered by first face)
   Vec<i64> corners;       // (Q, 4)
-  Vec<i64> pairs;         // (2Q, 2): inside, outside of each triangle
+  Vec<i64> pairs;         // (Q, 2): inside, outside of each quad (both its triangles)
   Vec<i32> sides;         // (Q, 2): wanted-label index of inside, outside (-1)
   i64 split = 0;
   i64 unresolved = 0;  // places where a label's surface is still not manifold
@@ -540,7 +540,7 @@ class Net {
     const i64 nq = quad_offsets();
     Vec<i64> corners(static_cast<size_t>(4 * nq));
     Vec<u8> flip(static_cast<size_t>(nq));
-    out.pairs.resize(size_t(4 * nq));
+    out.pairs.resize(size_t(2 * nq));
     out.sides.resize(size_t(2 * nq));
     Vec<i64> cell_of(static_cast<size_t>(nv));
     Vec<u8> sheet_of(static_cast<size_t>(nv));
@@ -961,10 +961,8 @@ class Net {
             const bool lo_inside = wl >= 0 && (wh < 0 || lo < hi);
             flip[q] = u8(!lo_inside);
             const i64 in = key(lo_inside ? lo : hi), out = key(lo_inside ? hi : lo);
-            for (int t = 0; t < 2; ++t) {
-              pairs[4 * q + 2 * t] = in;
-              pairs[4 * q + 2 * t + 1] = out;
-            }
+            pairs[2 * q] = in;
+            pairs[2 * q + 1] = out;
             sides[2 * q] = lo_inside ? wl : wh;
             sides[2 * q + 1] = lo_inside ? wh : wl;
           }
@@ -1231,7 +1229,7 @@ void bind_label_type(nb::module_ &m) {
       "relaxation"_a, "constraint"_a, "reverse"_a, "threads"_a, "z_offset"_a = 0,
       "count_lo"_a = 0, "count_hi"_a = -1,
       "The surface net of a (Z, Y, X) label volume: (positions (V, 3) in index units, "
-      "dual_cells (V,), sheets (V,) uint8, corners (Q, 4), pairs (2Q, 2), sides (Q, 2) int32, "
+      "dual_cells (V,), sheets (V,) uint8, corners (Q, 4), pairs (Q, 2), sides (Q, 2) int32, "
       "split, unresolved, outside). A slab of a larger volume: z_offset its first layer "
       "(positions in the volume's index units), counts of dual-cell layers "
       "count_lo <= z < count_hi only (count_hi < 0: all).");

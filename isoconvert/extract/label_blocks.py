@@ -346,7 +346,7 @@ def run_label_slab(job: LabelSlabJob, zyx: np.ndarray) -> LabelSlab:
         corners=local[corners],
         next_keys=next_keys,
         turned=turned,
-        pairs=pairs[0::2][mine],
+        pairs=pairs[mine],
         split=int(split),
         unresolved=int(unresolved),
         outside=int(outside),

@@ -371,7 +371,7 @@ def label_surfaces(
         vmin, vmax, present = _present_labels(samples, volume.source, threads)
         wanted, _ = _wanted_labels(present, labels, background, volume.source)
         samples = fit_background(samples, background)
-        positions, dual_cells, _, corners, pairs, sides, split, unresolved, outside = (
+        positions, dual_cells, _, corners, quad_labels, sides, split, unresolved, outside = (
             _native.label_net(
                 samples,
                 wanted,
@@ -386,7 +386,6 @@ def label_surfaces(
             )
         )
         del samples
-        quad_labels = pairs[0::2]  # the kernel's rows are per triangle, two alike per quad
     if len(corners) == 0:
         raise LevelError(f"{volume.source}: no label surface (every sample is background)")
     if (split or unresolved or outside) and on_status:
