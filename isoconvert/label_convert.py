@@ -192,15 +192,17 @@ def convert_labels(
         ]
     progress("writing")
 
-    def write(n: int, path: Path) -> Path:
+    def write(n: int, label: int, path: Path) -> Path:
         # in a worker thread: the label's mesh is built and written there, the
         # kernels and the file leaving the interpreter to the next label's
-        mesh = meshes[n] if meshes is not None else surfaces.meshes[surfaces.labels[n]]
+        mesh = meshes[n] if meshes is not None else surfaces.meshes[label]
         return write_mesh(mesh, path, format=writer.name, ascii=opts.ascii, force=opts.force)
 
-    written = threaded_in_order(write, enumerate(outputs), kernel_threads())
+    labels = surfaces.labels
+    jobs = zip(range(len(labels)), labels, outputs, strict=True)
+    written = threaded_in_order(write, jobs, kernel_threads())
     results = []
-    for n, (label, path) in enumerate(zip(surfaces.labels, written, strict=True)):
+    for n, (label, path) in enumerate(zip(labels, written, strict=True)):
         extracted = surfaces[label]
         mesh = meshes[n] if meshes is not None else extracted
         results.append(
