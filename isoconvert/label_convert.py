@@ -198,11 +198,11 @@ def convert_labels(
         mesh = meshes[n] if meshes is not None else surfaces.meshes[label]
         return write_mesh(mesh, path, format=writer.name, ascii=opts.ascii, force=opts.force)
 
-    labels = surfaces.labels
-    jobs = zip(range(len(labels)), labels, outputs, strict=True)
+    made = surfaces.labels  # the labels extracted (``labels`` may name none)
+    jobs = zip(range(len(made)), made, outputs, strict=True)
     written = threaded_in_order(write, jobs, kernel_threads())
     results = []
-    for n, (label, path) in enumerate(zip(labels, written, strict=True)):
+    for n, (label, path) in enumerate(zip(made, written, strict=True)):
         extracted = surfaces[label]
         mesh = meshes[n] if meshes is not None else extracted
         results.append(
