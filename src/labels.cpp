@@ -524,17 +524,37 @@ class Net {
     }
     resolve_flips();
     // provisional vertex and stencil numbering: chunk by chunk, cells in sweep order
-    i64 nv = 0, ne = 0;
-    std::vector<const Cell *> split_cells;  // cells of two or more vertices (few)
-    for (auto &ch : chunks_) {
-      for (auto &c : ch.cells) {
-        c.first = nv;
-        c.nbfirst = ne;
-        nv += c.nsheets;
-        for (int s = 0; s < c.nsheets; ++s) ne += (c.nbcount >> (4 * s)) & 15;
-        if (c.nsheets > 1) split_cells.push_back(&c);
-      }
+    // (each chunk's own counts in parallel, then its cells from its offsets)
+    const i64 nchunks = i64(chunks_.size());
+    std::vector<i64> chunk_nv(size_t(nchunks + 1), 0), chunk_ne(size_t(nchunks + 1), 0);
+    std::vector<std::vector<const Cell *>> chunk_split(static_cast<size_t>(nchunks));
+    auto number = [&](bool assign) {
+      iso::parallel_for(nchunks, o_.threads, 1, [&](int, i64 b, i64 e) {
+        for (i64 h = b; h < e; ++h) {
+          // totals from 0 (chunk_nv[h] is another chunk's to write), then from the offsets
+          i64 v = assign ? chunk_nv[size_t(h)] : 0, n = assign ? chunk_ne[size_t(h)] : 0;
+          for (auto &c : chunks_[size_t(h)].cells) {
+            if (assign) {
+              c.first = v;
+              c.nbfirst = n;
+              if (c.nsheets > 1) chunk_split[size_t(h)].push_back(&c);
+            }
+            v += c.nsheets;
+            for (int s = 0; s < c.nsheets; ++s) n += (c.nbcount >> (4 * s)) & 15;
+          }
+          if (!assign) chunk_nv[size_t(h + 1)] = v, chunk_ne[size_t(h + 1)] = n;
+        }
+      });
+    };
+    number(false);  // each chunk's totals, from 0
+    for (i64 h = 0; h < nchunks; ++h) {
+      chunk_nv[size_t(h + 1)] += chunk_nv[size_t(h)];
+      chunk_ne[size_t(h + 1)] += chunk_ne[size_t(h)];
     }
+    number(true);
+    const i64 nv = chunk_nv[size_t(nchunks)], ne = chunk_ne[size_t(nchunks)];
+    std::vector<const Cell *> split_cells;  // cells of two or more vertices (few)
+    for (auto &part : chunk_split) split_cells.insert(split_cells.end(), part.begin(), part.end());
     count_cells(out);
     unsplit_rings(out);
     const i64 nq = quad_offsets();
@@ -570,9 +590,13 @@ class Net {
       }
     }
     // Final numbering: vertices in the order their first quad corner comes.
+    // Serial (the order is the first use); the rank of a corner a few ahead is
+    // fetched meanwhile, as its provisional index is scattered over the cells.
     std::vector<i64> rank(size_t(nv), -1);
     i64 next = 0;
+    constexpr i64 kAhead = 16;
     for (i64 k = 0; k < 4 * nq; ++k) {
+      if (k + kAhead < 4 * nq) __builtin_prefetch(&rank[size_t(corners[size_t(k + kAhead)])], 1);
       i64 &r = rank[size_t(corners[size_t(k)])];
       if (r < 0) r = next++;
       corners[size_t(k)] = r;
