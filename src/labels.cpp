@@ -151,6 +151,22 @@ void label_presence(const T *f, i64 n, int threads, Presence &out) {
   }
 }
 
+// Each of 0..n-1 numbered in the order it first comes in v[0..count) (rank[i] stays
+// -1 where it never does), and, with `renumbered`, each v[k] replaced by its rank
+// there (it may be v itself): label_net's vertices by their first quad corner, and
+// the slabs' merge (first_use_numbering). Serial, as the order is the first use; the
+// rank of an index a few ahead is fetched meanwhile (the indices are scattered).
+inline void first_use_ranks(const i64 *v, i64 count, i64 *rank, i64 *renumbered = nullptr) {
+  constexpr i64 kAhead = 16;
+  i64 next = 0;
+  for (i64 k = 0; k < count; ++k) {
+    if (k + kAhead < count) __builtin_prefetch(rank + v[k + kAhead], 1);
+    i64 &r = rank[v[k]];
+    if (r < 0) r = next++;
+    if (renumbered) renumbered[k] = r;
+  }
+}
+
 // --- blocks of 2x2x2 samples ------------------------------------------------------------------
 
 // Sample o = ox + 2 oy + 4 oz of a dual cell's block is at (x - 1 + ox, ...).
@@ -590,17 +606,8 @@ class Net {
       }
     }
     // Final numbering: vertices in the order their first quad corner comes.
-    // Serial (the order is the first use); the rank of a corner a few ahead is
-    // fetched meanwhile, as its provisional index is scattered over the cells.
     std::vector<i64> rank(size_t(nv), -1);
-    i64 next = 0;
-    constexpr i64 kAhead = 16;
-    for (i64 k = 0; k < 4 * nq; ++k) {
-      if (k + kAhead < 4 * nq) __builtin_prefetch(&rank[size_t(corners[size_t(k + kAhead)])], 1);
-      i64 &r = rank[size_t(corners[size_t(k)])];
-      if (r < 0) r = next++;
-      corners[size_t(k)] = r;
-    }
+    first_use_ranks(corners.data(), 4 * nq, rank.data(), corners.data());
     iso::parallel_for(nq, o_.threads, 1 << 16, [&](int, i64 b, i64 e) {
       for (i64 q = b; q < e; ++q) {
         i64 *c = &corners[size_t(4 * q)];
@@ -1280,10 +1287,7 @@ void bind_labels(nb::module_ &m) {
         {
           nb::gil_scoped_release unlocked;
           std::fill(rank.begin(), rank.end(), i64(-1));
-          i64 next = 0;
-          for (i64 k = 0; k < count; ++k) {
-            if (rank[size_t(v[k])] < 0) rank[size_t(v[k])] = next++;
-          }
+          first_use_ranks(v, count, rank.data());
         }
         return give(std::move(rank));
       },
