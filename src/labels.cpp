@@ -528,16 +528,6 @@ class Net {
                       [&](int, i64 b, i64 e) {
                         for (i64 c = b; c < e; ++c) sweep(chunks_[size_t(c)]);
                       });
-    for (auto &ch : chunks_) {
-      i64 at = 0;
-      for (i64 z = 0; z <= Z_; ++z) {
-        for (i64 y = ch.y0; y < ch.y1; ++y) {
-          const i64 n = ch.row_count[size_t((z * (ch.y1 - ch.y0)) + (y - ch.y0))];
-          rows_[size_t(z * (Y_ + 1) + y)] = Row{ch.cells.data() + at, ch.cells.data() + at + n};
-          at += n;
-        }
-      }
-    }
     resolve_flips();
     // provisional vertex and stencil numbering: chunk by chunk, cells in sweep order
     // (each chunk's own counts in parallel, then its cells from its offsets)
@@ -549,14 +539,16 @@ class Net {
         for (i64 h = b; h < e; ++h) {
           // totals from 0 (chunk_nv[h] is another chunk's to write), then from the offsets
           i64 v = assign ? chunk_nv[size_t(h)] : 0, n = assign ? chunk_ne[size_t(h)] : 0;
-          for (auto &c : chunks_[size_t(h)].cells) {
-            if (assign) {
-              c.first = v;
-              c.nbfirst = n;
-              if (c.nsheets > 1) chunk_split[size_t(h)].push_back(&c);
+          for (auto &block : chunks_[size_t(h)].blocks) {
+            for (auto &c : block) {
+              if (assign) {
+                c.first = v;
+                c.nbfirst = n;
+                if (c.nsheets > 1) chunk_split[size_t(h)].push_back(&c);
+              }
+              v += c.nsheets;
+              for (int s = 0; s < c.nsheets; ++s) n += (c.nbcount >> (4 * s)) & 15;
             }
-            v += c.nsheets;
-            for (int s = 0; s < c.nsheets; ++s) n += (c.nbcount >> (4 * s)) & 15;
           }
           if (!assign) chunk_nv[size_t(h + 1)] = v, chunk_ne[size_t(h + 1)] = n;
         }
@@ -634,8 +626,10 @@ class Net {
  private:
   struct Chunk {
     i64 y0, y1;
-    std::vector<Cell> cells;
-    std::vector<i64> row_count;  // per (z, y), z-major
+    // the cells, in sweep order, in blocks that are never reallocated (the rows
+    // point into them; a vector grown cell by cell would copy them all about
+    // twice over, into fresh pages): a row never straddles two blocks
+    std::vector<Vec<Cell>> blocks;
     std::vector<std::array<i64, 4>> rings;  // (x, y, z, b) of rings with two groups
   };
 
@@ -671,8 +665,8 @@ class Net {
       for (auto &b : a) b.resize(size_t(X_ + 2));
     }
     std::vector<u8> same(static_cast<size_t>(X_ + 2)), mixed(static_cast<size_t>(X_ + 9), 0);
-    ch.row_count.assign(size_t((Z_ + 1) * (ch.y1 - ch.y0)), 0);
     const i64 cy = Y_ + 1;
+    const size_t row_cells = size_t(X_ + 1), block_cells = std::max<size_t>(row_cells, 8192);
     for (i64 z = 0; z <= Z_; ++z) {
       for (i64 y = ch.y0; y < ch.y1; ++y) {
         if (y == ch.y0) {
@@ -691,7 +685,12 @@ class Net {
         for (i64 i = 0; i < X_ + 2; ++i) {
           same[size_t(i)] = u8((a[i] == b[i]) & (a[i] == c[i]) & (a[i] == d[i]));
         }
-        const size_t before = ch.cells.size();
+        if (ch.blocks.empty() || ch.blocks.back().capacity() - ch.blocks.back().size() < row_cells) {
+          ch.blocks.emplace_back();
+          ch.blocks.back().reserve(block_cells);
+        }
+        Vec<Cell> &cells = ch.blocks.back();
+        const size_t before = cells.size();
         for (i64 x = 0; x <= X_; ++x) {
           mixed[size_t(x)] = u8(!(same[size_t(x)] & same[size_t(x + 1)] & (a[x] == a[x + 1])));
         }
@@ -728,7 +727,7 @@ class Net {
             if (!make_cell(v, w, 0, cell)) continue;
           }
           cell.x = i32(x);
-          ch.cells.push_back(cell);
+          cells.push_back(cell);
           const i64 col = x * cy + y;
           if ((cell.kept >> 3) & 1) ++count_[0][size_t(col)];
           if ((cell.kept >> 7) & 1) ++count_[1][size_t(col)];
@@ -738,7 +737,7 @@ class Net {
           }
           }
         }
-        ch.row_count[size_t(z * (ch.y1 - ch.y0) + (y - ch.y0))] = i64(ch.cells.size() - before);
+        rows_[size_t(z * cy + y)] = Row{cells.data() + before, cells.data() + cells.size()};
       }
     }
   }

@@ -11,6 +11,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <stdexcept>
 #include <vector>
 
@@ -71,11 +73,20 @@ void candidates(const double *xyz, i64 nv, const i64 *cells, i64 nt, const i64 *
 // (-0.0 and 0.0 alike; NaN never reaches it: NaN counts as moved).
 struct Position32 {
   float x, y, z;
-  bool operator<(const Position32 &o) const {
-    return x < o.x || (x == o.x && (y < o.y || (y == o.y && z < o.z)));
-  }
   bool operator==(const Position32 &o) const { return x == o.x && y == o.y && z == o.z; }
 };
+
+// Equal positions (-0.0 normalized to 0.0 beforehand) hash alike: a slot of a
+// table of 2^bits from the high bits of a multiplicative hash, which depend on
+// every bit of the three (grid positions have zero low mantissa bits).
+inline size_t hash32(const Position32 &q, int bits) {
+  std::uint32_t b[3];
+  std::memcpy(b, &q, sizeof b);
+  const std::uint64_t h = std::uint64_t(b[0]) * 0x9E3779B97F4A7C15ull +
+                          std::uint64_t(b[1]) * 0xC2B2AE3D27D4EB4Full +
+                          std::uint64_t(b[2]) * 0x165667B19E3779F9ull;
+  return size_t(h >> (64 - bits));
+}
 
 inline bool moves(const double *p) {
   // NaN compares unequal to itself: it counts as moved, as numpy's != says
@@ -98,20 +109,32 @@ void moved_by_float32(const double *xyz, i64 nv, const i64 *cells, i64 nc, int c
     some.resize(static_cast<size_t>(nv));
     for (i64 v = 0; v < nv; ++v) some[v] = v;
   } else {
-    std::vector<Position32> landing;
-    landing.reserve(static_cast<size_t>(count));
+    // where the moved vertices land, in an open-addressing set (a sorted list
+    // searched once per vertex cost more than the rest of the pass)
+    int bits = 4;
+    while ((size_t(1) << bits) < 2 * size_t(count)) ++bits;
+    const size_t size = size_t(1) << bits;
+    std::vector<Position32> slot(size);
+    std::vector<unsigned char> used(size, 0);
+    auto find = [&](const Position32 &q) {
+      size_t h = hash32(q, bits);
+      while (used[h] && !(slot[h] == q)) h = (h + 1) & (size - 1);
+      return h;
+    };
     for (i64 v = 0; v < nv; ++v) {
       const double *p = xyz + 3 * v;  // + 0.0f: -0.0 lands where 0.0 does
       if (!moved[v] || std::isnan(p[0] + p[1] + p[2])) continue;  // no vertex stays at NaN
-      landing.push_back({float(p[0]) + 0.0f, float(p[1]) + 0.0f, float(p[2]) + 0.0f});
+      const Position32 q{float(p[0]) + 0.0f, float(p[1]) + 0.0f, float(p[2]) + 0.0f};
+      const size_t h = find(q);
+      slot[h] = q;
+      used[h] = 1;
     }
-    std::sort(landing.begin(), landing.end());
     for (i64 v = 0; v < nv; ++v) {
       bool keep = moved[v];
       if (!keep) {
         const double *p = xyz + 3 * v;
         const Position32 q{float(p[0]) + 0.0f, float(p[1]) + 0.0f, float(p[2]) + 0.0f};
-        keep = std::binary_search(landing.begin(), landing.end(), q);
+        keep = used[find(q)] != 0;
       }
       if (keep) some.push_back(v);
     }
