@@ -42,7 +42,7 @@ __version__ = "0.1.0"
 
 #: Public name -> the module that defines it (relative to this package).
 _PUBLIC = {
-    "Blocks": ".extract.blocks",
+    "Blocks": ".extract.slabs",
     "ConvertOptions": ".convert",
     "ConvertResult": ".convert",
     "convert": ".convert",
@@ -69,7 +69,7 @@ if TYPE_CHECKING:
     from .convert import ConvertOptions, ConvertResult, convert
     from .errors import IsoconvertError
     from .extract import EXTRACTORS, extract
-    from .extract.blocks import Blocks
+    from .extract.slabs import Blocks
     from .mesh import Mesh, as_mesh
     from .readers import READERS, ReadOptions, read_volume
     from .report import check_mesh

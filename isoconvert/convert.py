@@ -1,4 +1,10 @@
-"""The main job: read a volume, extract a surface, write it."""
+"""The main job: read a volume, extract a surface, write it.
+
+The extraction (:mod:`isoconvert.extract.dispatch`, :mod:`isoconvert.attributes`)
+is imported by the functions that extract: :mod:`isoconvert.label_convert`
+shares this module's options, reading and checks, and a label run needs none
+of the isosurface kernels (a fifth of its start-up time).
+"""
 
 from __future__ import annotations
 
@@ -11,10 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import check_output, output_stream, refuse_inputs, refuse_shared, refuse_stream
-from .attributes import check_3d, vertex_normals, vertex_values
 from .errors import FormatError, IsoconvertError, OutputError
-from .extract import default_method, extract
-from .extract.blocks import Blocks
+from .extract.slabs import Blocks
 from .extract.tables import DEFAULT_AMBIGUITY
 from .mesh import Mesh
 from .post.pipeline import PostOptions, post_process
@@ -296,6 +300,9 @@ def convert_levels(
     refuse_shared([*outputs, *also_writes])
     for path in [*outputs, *also_writes]:  # the input file itself, before its header is read
         refuse_inputs(path, [input] if Path(input).is_file() else [])
+    from .attributes import check_3d
+    from .extract.dispatch import default_method
+
     progress("reading")
     volume = read_input(input, opts)
     opts.post.check_method(opts.method or default_method(volume))
@@ -337,6 +344,8 @@ def _convert_levels_to_layer(
     refuse_shared([output, *also_writes])
     for path in also_writes:
         refuse_inputs(path, [input] if Path(input).is_file() else [])
+    from .extract.dispatch import default_method
+
     progress("reading")
     volume = read_input(input, opts)
     opts.post.check_method(opts.method or default_method(volume))
@@ -491,6 +500,8 @@ def _extract_and_write(
     progress: Callable[[str], None],
 ) -> ConvertResult:
     """Extract one level, post-process, sample attributes, write."""
+    from .attributes import vertex_normals, vertex_values
+
     blocks = opts.blocks
     if writer.streams and blocks.spill_dir is None:
         # a block-wise mesh larger than the budget waits for the writer on disk
@@ -529,6 +540,8 @@ def _extract(
 ) -> tuple[Mesh, Mesh | None]:
     """Extract one level and post-process it: the mesh, and the mesh as extracted
     when post-processing changed it (else None)."""
+    from .extract.dispatch import extract
+
     method_options = {} if opts.axis is None else {"axis": opts.axis}
     if opts.vertex_offset is not None:
         method_options["vertex_offset"] = opts.vertex_offset
@@ -565,6 +578,8 @@ def _extract(
 
 def _value_volume(opts: ConvertOptions, volume: Volume) -> Volume:
     """The volume of ``--values``, in the world frame of ``volume``."""
+    from .attributes import check_3d
+
     values = read_volume(
         opts.values, **{name: getattr(opts.read, name) for name in opts.read.given()}
     )

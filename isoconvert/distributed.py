@@ -7,8 +7,9 @@ The engine now lives in the task runner, below both of its users (issue 21):
   ``scheduler_address``, ``connect_timeout``, ``cluster_threads``,
   ``window_size``, ``SCHEDULER_ENV``, ``TIMEOUT_ENV``, ``DEFAULT_TIMEOUT``);
 * :mod:`isoconvert.runner.tasks`: ``TaskFailure`` and ``worker_threads``;
-* :mod:`isoconvert.extract.blocks`: the slabs of a volume as tasks
-  (``dask_runner``, ``extract_slab``);
+* :mod:`isoconvert.extract.slabs`: the slabs of a volume as tasks
+  (``dask_runner``);
+* :mod:`isoconvert.extract.blocks`: a slab's isosurface (``extract_slab``);
 * :mod:`isoconvert.batch`: the files of a batch as tasks (``run_on_cluster``).
 
 Every name is looked up in those modules on use, and assigning one here
@@ -26,7 +27,8 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from .batch import run_on_cluster
-    from .extract.blocks import dask_runner, extract_slab
+    from .extract.blocks import extract_slab
+    from .extract.slabs import dask_runner
     from .runner.dask import (
         DEFAULT_TIMEOUT,
         SCHEDULER_ENV,
@@ -44,6 +46,7 @@ if TYPE_CHECKING:
 _HOMES = (
     "isoconvert.runner.dask",
     "isoconvert.runner.tasks",
+    "isoconvert.extract.slabs",
     "isoconvert.extract.blocks",
     "isoconvert.batch",
 )

@@ -74,21 +74,21 @@ class Extractor:
 EXTRACTORS: Registry[Extractor] = Registry(
     "extraction method",
     plugin_group=PLUGIN_GROUP,
-    adapt=LazyFunction("isoconvert.extract:_from_plugin"),
+    adapt=LazyFunction("isoconvert.extract.dispatch:_from_plugin"),
 )
 EXTRACTORS.declare(
     "cubes",
-    "isoconvert.extract:CUBES",
+    "isoconvert.extract.dispatch:CUBES",
     summary="Marching Cubes (3D): triangles; watertight closed surfaces; table derived in code",
 )
 EXTRACTORS.declare(
     "tetra",
-    "isoconvert.extract:TETRA",
+    "isoconvert.extract.dispatch:TETRA",
     summary="Marching Tetrahedra (3D): six tetrahedra per cube, no ambiguous cases, more triangles",
 )
 EXTRACTORS.declare(
     "squares",
-    "isoconvert.extract:SQUARES",
+    "isoconvert.extract.dispatch:SQUARES",
     summary="Marching Squares (2D images, or every slice of a 3D volume across --axis): segments",
 )
 

@@ -163,7 +163,7 @@ def batch(
     for item in batching.drop_outputs(skipped, work, outcomes, previews, written):
         outcomes.append(batching.Outcome(item.path, "", "skipped", message=item.reason))
     from ..distributed import scheduler_address
-    from ..extract.blocks import Blocks
+    from ..extract.slabs import Blocks
 
     workers = batching.check_jobs(jobs, files=len(work))
     # the files running at once share the budget

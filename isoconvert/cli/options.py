@@ -421,7 +421,7 @@ class MemoryArgs:
     def blocks(self):
         """The Blocks of one conversion (convert; batch shares its budget out itself)."""
         from ..distributed import scheduler_address
-        from ..extract.blocks import Blocks
+        from ..extract.slabs import Blocks
 
         return Blocks(
             size=self.block_size,

@@ -16,8 +16,10 @@ gives the in-memory mesh bit for bit, whatever the slab thickness.
 
 The same :func:`run_block` runs here (:func:`run_local`, the next slab read
 ahead by :func:`isoconvert.runner.local.read_ahead`) and as a task of a Dask
-cluster (:func:`dask_runner` hands the slabs to :func:`isoconvert.runner.run_in_order`);
-:func:`stitch_blocks` merges results in either case.
+cluster (:func:`isoconvert.extract.slabs.dask_runner` hands the slabs to
+:func:`isoconvert.runner.run_in_order`); :func:`stitch_blocks` merges results
+in either case. How slabs are cut and sent is :mod:`isoconvert.extract.slabs`,
+shared with the label net's slabs.
 
 Where a cluster's slabs are read:
 
@@ -37,29 +39,26 @@ runner knows nothing of slabs, and the block engine nothing of Dask.
 from __future__ import annotations
 
 import contextlib
-import copy
 import gc
 import mmap
-import pickle
 import tempfile
-import uuid
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from ..atomic import DiskFullError, disk_full_error
-from ..errors import IsoconvertError, one_line
-from ..grid import LazyGrid, SlabReader, grid_slab_zyx
+from ..errors import IsoconvertError
+from ..grid import LazyGrid, SlabReader
 from ..memory import FileMap
 from ..mesh import Mesh
 from ..methods import NO_DEGENERATE_OFFSET, TRILINEAR
-from ..runner import Task, TaskFailure, cluster_size, run_in_order, worker_threads
+from ..runner import TaskFailure, cluster_size
 from ..runner.local import read_ahead
 from ..threads import kernel_threads
 from ..volume import ValueRange, Volume
+from . import slabs
 from .cubes import FilledNormals, fill_pass_normals, nan_as_exact
 from .placement import Allocate, kernel_outputs, mesh_info, reversed_orientation
 from .prepare import (
@@ -73,6 +72,13 @@ from .prepare import (
     nonfinite_error,
     resolve_vertex_offset,
 )
+from .slabs import (
+    _SLABS_PER_THREAD,
+    DEFAULT_MAX_MEMORY,
+    Blocks,
+    slab_ranges,
+    slab_task,
+)
 from .tables import DEFAULT_AMBIGUITY
 from .trilinear import interior_layer
 
@@ -83,96 +89,6 @@ NORMALS_HALO = 2
 
 #: Methods that run block-wise, and how many edge directions number their ids.
 BLOCK_METHODS = {"cubes": 3, "tetra": 7, "squares": 3}
-
-#: The default memory budget of block-wise extraction (``--max-memory``).
-DEFAULT_MAX_MEMORY = 1 << 30
-
-#: Slabs per thread of a Dask cluster, when the budget would make fewer.
-_SLABS_PER_THREAD = 4
-
-#: Copies of a slab alive at once: the one being extracted, its kernel-type or
-#: NaN-free copy, and the next one being read. Slabs get half the budget;
-#: the mesh, a quarter before it moves to disk (when it may).
-_SLAB_COPIES = 3
-
-
-@dataclass(frozen=True)
-class Blocks:
-    """How to cut a volume into blocks, and where to run them.
-
-    Attributes
-    ----------
-    size : int or None
-        z-layers each block owns (it reads one more); None chooses from
-        ``max_memory``.
-    max_memory : int or None
-        Bytes that block-wise extraction may hold at once, beyond the
-        program itself: slabs of samples take half, the mesh being built a
-        quarter before it moves to ``spill_dir`` (when there is one). None is
-        :data:`DEFAULT_MAX_MEMORY`.
-    scheduler : str or None
-        A Dask scheduler address (``tcp://host:8786``) to run the blocks on;
-        None runs them here.
-    spill_dir : Path or None
-        Where the mesh being built moves (into nameless temporary files) once
-        it is larger than a quarter of ``max_memory``; None keeps it in memory. A writer
-        then streams it to its file (:func:`isoconvert.convert` sets the
-        output's folder).
-    """
-
-    size: int | None = None
-    max_memory: int | None = None
-    scheduler: str | None = None
-    spill_dir: Path | None = None
-
-    def __post_init__(self) -> None:
-        if self.size is not None and self.size < 1:
-            raise IsoconvertError(f"--block-size must be at least 1 layer, got {self.size}")
-        if self.max_memory is not None and self.max_memory <= 0:
-            raise IsoconvertError(f"--max-memory must be positive, got {self.max_memory}")
-
-    @property
-    def budget(self) -> int:
-        return self.max_memory or DEFAULT_MAX_MEMORY
-
-    @property
-    def asked(self) -> bool:
-        """Whether block-wise extraction was asked for (a size or a scheduler)."""
-        return self.size is not None or self.scheduler is not None
-
-    def wanted(self, volume: Volume) -> bool:
-        """Whether ``volume`` is to be extracted block-wise: asked for (a size or
-        a scheduler), or read from its file (a lazy volume), whatever its size:
-        the mesh, not the volume, may be what outgrows the budget, and a volume
-        that fits is one slab (block-wise costs what the in-memory path does)."""
-        if volume.ndim != 3:
-            if self.asked:
-                raise IsoconvertError(
-                    f"{volume.source}: a 2D image is contoured in memory; "
-                    "drop --block-size and --scheduler"
-                )
-            return False
-        return self.asked or volume.grid is not None
-
-    def layers(self, shape: tuple[int, int, int], itemsize: int) -> int:
-        """z-layers per block: :attr:`size`, or what fits the budget."""
-        if self.size is not None:
-            return self.size
-        layer = shape[0] * shape[1] * max(itemsize, 1) * _SLAB_COPIES
-        return max(1, self.budget // 2 // layer)
-
-
-def slab_ranges(nz: int, layers: int) -> list[tuple[int, int]]:
-    """Owned z-ranges ``[k0, k1)`` of ``layers`` layers covering ``0 <= k < nz``.
-
-    Every slab but the last reads layer ``k1`` too; the last owns the grid's
-    last layer and reads nothing more, so it is given at least two layers (a
-    lone last layer joins the slab before it).
-    """
-    cuts = list(range(0, nz, max(1, layers))) + [nz]
-    if len(cuts) > 2 and cuts[-1] - cuts[-2] < 2:
-        del cuts[-2]
-    return list(zip(cuts[:-1], cuts[1:], strict=True))
 
 
 @dataclass(frozen=True)
@@ -297,13 +213,6 @@ class BlockResult:
     normals: FilledNormals | None = None
 
 
-def read_block(source: np.ndarray | LazyGrid, job: BlockJob) -> np.ndarray:
-    """The samples of ``job``'s slab, ``(layers, Y, X)``, from an (X, Y, Z)
-    array or a lazy grid."""
-    lo, hi = job.read_range
-    return grid_slab_zyx(source, lo, hi)
-
-
 def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) -> BlockResult:
     """Extract one slab: the kernels' first pass and count-and-fill on its samples.
 
@@ -311,7 +220,7 @@ def run_block(job: BlockJob, zyx: np.ndarray, allocate: Allocate | None = None) 
     ----------
     job : BlockJob
     zyx : (layers, Y, X) array
-        :func:`read_block` of ``job``.
+        :func:`~isoconvert.extract.slabs.read_block` of ``job``.
     allocate : callable or None
         Where the kernel writes (:meth:`MeshSink.allocate`); the result then
         holds no arrays but the ids it needs. None: fresh arrays, kept in the
@@ -901,8 +810,8 @@ def extract_blocks(
     offset = 0.0 if auto or vertex_offset == 0 else check_vertex_offset(vertex_offset)
     arity = 2 if method == "squares" else 3
     if blocks.scheduler is not None:
-        runner: Runner | None = dask_runner(
-            blocks.scheduler, source, volume.source, max_bytes=blocks.budget
+        runner: Runner | None = slabs.dask_runner(
+            blocks.scheduler, source, volume.source, extract_slab, max_bytes=blocks.budget
         )
         if blocks.size is None:  # enough slabs to keep every thread of the cluster busy
             per_thread = -(
@@ -995,7 +904,7 @@ def extract_slab(job: BlockJob, samples: np.ndarray | LazyGrid) -> BlockResult |
         (the mesh is the same for any number).
     samples : LazyGrid or (layers, Y, X) array
         The grid to read the slab from (on the worker), or the slab itself
-        (:func:`read_block` of ``job``, read by the client).
+        (:func:`~isoconvert.extract.slabs.read_block` of ``job``, read by the client).
 
     Returns
     -------
@@ -1003,169 +912,6 @@ def extract_slab(job: BlockJob, samples: np.ndarray | LazyGrid) -> BlockResult |
         The result with its arrays; a failure for an ``IsoconvertError``.
     """
     return slab_task(run_block, job, samples)
-
-
-def slab_task(run: Callable[[Any, np.ndarray], Any], job: Any, samples: np.ndarray | LazyGrid):
-    """``run(job, zyx)`` on a worker: the slab's samples read from the grid there
-    (``job.read_range``) unless they were sent, the worker's own thread count, and
-    an ``IsoconvertError`` returned as a :class:`~isoconvert.runner.TaskFailure`."""
-    try:
-        job = replace(job, threads=worker_threads())
-        if isinstance(samples, LazyGrid):
-            try:
-                zyx = read_block(samples, job)
-            except OSError as exc:
-                raise IsoconvertError(_unreadable(samples, job, exc)) from None
-        else:
-            zyx = samples
-        return run(job, zyx)
-    except IsoconvertError as exc:
-        return TaskFailure.of(exc)
-
-
-def _unreadable(grid: LazyGrid, job: BlockJob, exc: OSError) -> str:
-    import socket
-
-    lo, hi = job.read_range
-    reason = exc.strerror or one_line(exc)
-    return (
-        f"{getattr(grid, 'path', job.source)}: a Dask worker on {socket.gethostname()} cannot "
-        f"read z-layers {lo}..{hi - 1} ({reason}); the workers need the same files at the "
-        "same paths (a shared file system)"
-    )
-
-
-def _worker_side(source: np.ndarray | LazyGrid) -> LazyGrid | None:
-    """``source`` as workers should receive it when they can read their own
-    slabs (a grid read out of order, paths made absolute), else None."""
-    if not isinstance(source, LazyGrid) or source.sequential:
-        return None
-    grid = _absolute(source)
-    try:
-        pickle.dumps(grid)
-    except Exception:  # holds something a worker cannot receive: read here instead
-        return None
-    return grid
-
-
-def _absolute(grid: LazyGrid) -> LazyGrid:
-    """A copy of ``grid`` whose paths (attributes holding a Path, or a list or
-    tuple of them) are absolute: a worker's working folder is not ours."""
-    state = getattr(grid, "__dict__", {})
-    if not any(_relative_paths(v) for v in state.values()):
-        return grid
-    out = copy.copy(grid)
-    for name, value in state.items():
-        if isinstance(value, Path):
-            setattr(out, name, value.absolute())
-        elif isinstance(value, list | tuple) and any(isinstance(v, Path) for v in value):
-            fixed = [v.absolute() if isinstance(v, Path) else v for v in value]
-            setattr(out, name, type(value)(fixed) if isinstance(value, tuple) else fixed)
-    return out
-
-
-def _relative_paths(value: Any) -> bool:
-    if isinstance(value, Path):
-        return not value.is_absolute()
-    if isinstance(value, list | tuple):
-        return any(isinstance(v, Path) and not v.is_absolute() for v in value)
-    return False
-
-
-def _slab_bytes(source: np.ndarray | LazyGrid, job: BlockJob) -> int:
-    lo, hi = job.read_range
-    nx, ny, _ = source.shape
-    return (hi - lo) * nx * ny * np.dtype(source.dtype).itemsize
-
-
-SlabTask = Callable[[BlockJob, Any], Any]
-
-
-def dask_runner(
-    address: str,
-    source: np.ndarray | LazyGrid,
-    name: str,
-    task: SlabTask | None = None,
-    *,
-    max_bytes: int | None = None,
-) -> Runner:
-    """A runner of slab jobs on the Dask cluster at ``address``, for
-    :func:`extract_blocks`: each slab one :class:`~isoconvert.runner.Task`
-    of :func:`isoconvert.runner.run_in_order`.
-
-    Connects now (so an unreachable scheduler fails before any work); the
-    runner may then be called more than once (an extraction restarted with
-    another vertex offset).
-
-    Parameters
-    ----------
-    address : str
-        The scheduler.
-    source : (X, Y, Z) array or LazyGrid
-        The volume's samples (``Volume.samples``).
-    name : str
-        The volume's name, for messages.
-    task : callable or None
-        ``task(job, samples)`` run on a worker for each slab, ``samples`` being
-        the grid to read from or the slab itself; None is :func:`extract_slab`.
-        It must be picklable. For tests, which wrap it.
-    max_bytes : int or None
-        Bytes of slabs read here and sent with their tasks that may be in
-        flight at once (at least two slabs are); None is :data:`DEFAULT_MAX_MEMORY`.
-
-    Returns
-    -------
-    callable
-        ``runner(jobs)``: a generator of the jobs' :class:`BlockResult`, in
-        the order of ``jobs``. Closing it (done, failed or abandoned) cancels
-        the tasks still in flight.
-
-    Raises
-    ------
-    IsoconvertError
-        As :func:`isoconvert.runner.dask.connect`; and, from the generator, a
-        slab whose workers kept dying, the connection to the scheduler lost,
-        or an ``IsoconvertError`` of a task (its own type and message).
-    """
-    cluster_size(address)  # connect now: an unreachable scheduler fails before any work
-    grid = _worker_side(source)
-    run = task or extract_slab
-    budget = max_bytes or DEFAULT_MAX_MEMORY
-
-    def died(slab: Task) -> str:
-        job = slab.item
-        return (
-            f"{name}: a Dask worker died while extracting z-layers {job.k0}..{job.k1 - 1} "
-            "(out of memory?), also when retried on other workers; nothing was written. "
-            "Give the workers more memory, or lower --block-size"
-        )
-
-    def runner(jobs: list[BlockJob]) -> Iterator[BlockResult]:
-        token = uuid.uuid4().hex[:12]
-
-        def slab_task(job: BlockJob) -> Task:
-            key = f"isoconvert-slab-{token}-{job.k0}"
-            what = f"{name}: z-layers {job.k0}..{job.k1 - 1}"
-            if grid is not None:  # each worker reads its own slab
-                return Task(run, (job, grid), key=key, what=what, item=job)
-            return Task(  # read here just before it is sent, in z order
-                run,
-                key=key,
-                what=what,
-                nbytes=_slab_bytes(source, job),
-                load=lambda: (job, read_block(source, job)),
-                item=job,
-            )
-
-        return run_in_order(
-            address,
-            map(slab_task, jobs),
-            budget=budget,
-            died=died,
-            tail="; nothing was written",
-        )
-
-    return runner
 
 
 class _Restart(Exception):
@@ -1210,13 +956,10 @@ __all__ = [
     "BlockResult",
     "Blocks",
     "MeshSink",
-    "dask_runner",
     "extract_blocks",
     "extract_slab",
-    "read_block",
     "run_block",
     "run_local",
     "slab_ranges",
-    "slab_task",
     "stitch_blocks",
 ]

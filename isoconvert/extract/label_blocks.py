@@ -31,7 +31,7 @@ The whole volume's order is rebuilt from keys, never from positions:
   reversed quads are turned (corner 0 of an unturned quad is its lowest cell).
 
 Slabs run here, the next one read while one is built, or as tasks of a Dask
-cluster (:func:`isoconvert.extract.blocks.dask_runner` with
+cluster (:func:`isoconvert.extract.slabs.dask_runner` with
 :func:`label_slab_task`); the client merges what they return
 (:func:`merge_slabs`). Memory holds a few slabs and the surfaces being merged,
 never the volume.
@@ -51,12 +51,12 @@ from ..runner import TaskFailure, cluster_size
 from ..runner.local import read_ahead
 from ..threads import kernel_threads
 from ..volume import Volume
+from .label_samples import fit_background, kernel_labels
+from .prepare import kernel_type
 
 # slabs per cluster thread, and copies of a slab's samples alive at once (the one
 # being meshed, its kernel-type copy, the next one read): as for isosurfaces
-from .blocks import _SLAB_COPIES, _SLABS_PER_THREAD, Blocks, dask_runner, slab_ranges, slab_task
-from .label_samples import fit_background, kernel_labels
-from .prepare import kernel_type
+from .slabs import _SLAB_COPIES, _SLABS_PER_THREAD, Blocks, dask_runner, slab_ranges, slab_task
 
 #: Layers of halo beyond the smoothing iterations: one for the dual cells at a
 #: slab's end (which see the background), three for the rounds of rings paired
@@ -117,7 +117,7 @@ class LabelSlabJob:
 
     @property
     def read_range(self) -> tuple[int, int]:
-        """Sample layers to read (the name :func:`~isoconvert.extract.blocks.dask_runner` uses)."""
+        """Sample layers to read (the name :func:`~isoconvert.extract.slabs.dask_runner` uses)."""
         return self.z0, self.z1
 
 
@@ -474,7 +474,7 @@ def _run_here(source, jobs: list[LabelSlabJob]) -> Iterator[LabelSlab]:
 
 def label_slab_task(job: LabelSlabJob, samples) -> LabelSlab | TaskFailure:
     """One slab as a task of a cluster: read it (unless sent), build it
-    (:func:`~isoconvert.extract.blocks.slab_task` of :func:`run_label_slab`).
+    (:func:`~isoconvert.extract.slabs.slab_task` of :func:`run_label_slab`).
 
     Parameters
     ----------

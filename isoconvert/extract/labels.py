@@ -95,11 +95,11 @@ from ..errors import LevelError, VolumeError
 from ..mesh import Mesh
 from ..threads import kernel_threads
 from ..volume import Volume
-from .blocks import Blocks
 from .label_blocks import MergedNet, merge_slabs, run_slabs, slab_jobs, wants_blocks
 from .label_samples import fit_background, kernel_labels
 from .placement import mesh_info, reversed_orientation
 from .prepare import kernel_type
+from .slabs import Blocks
 
 
 @dataclass(frozen=True)
