@@ -20,6 +20,7 @@
 #include <nanobind/stl/tuple.h>
 
 #include <algorithm>
+#include <atomic>
 #include <array>
 #include <cstring>
 #include <stdexcept>
@@ -463,6 +464,10 @@ struct NetOptions {
   // count_lo <= z < count_hi only (slab-local; count_hi < 0: every layer).
   i64 z_offset = 0;
   i64 count_lo = 0, count_hi = -1;
+  // Positions in world units when given: index position * scale + shift per
+  // axis, the two roundings of Volume.index_to_world for an axis-aligned grid
+  // (done here in the pass that writes them, not as two more passes in numpy).
+  const double *scale = nullptr, *shift = nullptr;
 };
 
 // How far split copies start from their dual cell's centre, as a fraction of
@@ -618,7 +623,13 @@ class Net {
         const i64 r = rank[size_t(p)];
         out.dual_cells[size_t(r)] = cell_of[size_t(p)];
         out.sheets[size_t(r)] = sheet_of[size_t(p)];
-        for (int k = 0; k < 3; ++k) out.positions[size_t(3 * r + k)] = pos[size_t(3 * p + k)];
+        if (o_.scale) {
+          for (int k = 0; k < 3; ++k) {
+            out.positions[size_t(3 * r + k)] = pos[size_t(3 * p + k)] * o_.scale[k] + o_.shift[k];
+          }
+        } else {
+          for (int k = 0; k < 3; ++k) out.positions[size_t(3 * r + k)] = pos[size_t(3 * p + k)];
+        }
       }
     });
   }
@@ -1231,8 +1242,14 @@ void bind_label_type(nb::module_ &m) {
       "label_net",
       [](Samples3<T> f, Int64s wanted, double background, double vmin, double vmax,
          int iterations, double relaxation, double constraint, bool reverse, int threads,
-         i64 z_offset, i64 count_lo, i64 count_hi) {
+         i64 z_offset, i64 count_lo, i64 count_hi, Doubles scale, Doubles shift) {
         if (wanted.ndim() != 1) throw std::invalid_argument("wanted labels: (L,) int64");
+        // None: positions in index units
+        const bool placed = scale.is_valid() || shift.is_valid();
+        if (placed && !(scale.is_valid() && shift.is_valid() && scale.size() == 3 &&
+                        shift.size() == 3)) {
+          throw std::invalid_argument("scale and shift: (3,) each, or both None");
+        }
         if (iterations < 0) throw std::invalid_argument("iterations must be >= 0");
         const bool fits = background >= double(std::numeric_limits<T>::lowest()) &&
                           background <= double(std::numeric_limits<T>::max());
@@ -1247,7 +1264,8 @@ void bind_label_type(nb::module_ &m) {
                                  std::min(vmin, background), std::max(vmax, background));
           Net<T> net(f.data(), i64(f.shape(0)), i64(f.shape(1)), i64(f.shape(2)), bg, index,
                      NetOptions{iterations, relaxation, constraint, reverse, threads, z_offset,
-                                count_lo, count_hi});
+                                count_lo, count_hi, placed ? scale.data() : nullptr,
+                                placed ? shift.data() : nullptr});
           net.run(r);
         }
         return nb::make_tuple(give(std::move(r.positions), 3), give(std::move(r.dual_cells)),
@@ -1257,8 +1275,10 @@ void bind_label_type(nb::module_ &m) {
       },
       "f"_a.noconvert(), "wanted"_a, "background"_a, "vmin"_a, "vmax"_a, "iterations"_a,
       "relaxation"_a, "constraint"_a, "reverse"_a, "threads"_a, "z_offset"_a = 0,
-      "count_lo"_a = 0, "count_hi"_a = -1,
-      "The surface net of a (Z, Y, X) label volume: (positions (V, 3) in index units, "
+      "count_lo"_a = 0, "count_hi"_a = -1, "scale"_a.none() = nb::none(),
+      "shift"_a.none() = nb::none(),
+      "The surface net of a (Z, Y, X) label volume: (positions (V, 3) in index units "
+      "(times scale plus shift, per axis, when given), "
       "dual_cells (V,), sheets (V,) uint8, corners (Q, 4), pairs (Q, 2), sides (Q, 2) int32, "
       "split, unresolved, outside). A slab of a larger volume: z_offset its first layer "
       "(positions in the volume's index units), counts of dual-cell layers "
@@ -1304,22 +1324,26 @@ void bind_labels(nb::module_ &m) {
               "label_quads: corners (Q, 4), vertices (V, 3), sides (Q, 2), nlabels >= 0");
         }
         const i64 nq = i64(corners.shape(0)), nv = i64(vertices.shape(0));
-        for (i64 k = 0; k < 4 * nq; ++k) {
-          if (corners.data()[k] < 0 || corners.data()[k] >= nv) {
-            throw std::invalid_argument("label_quads: a corner is not a vertex");
-          }
-        }
-        for (i64 k = 0; k < 2 * nq; ++k) {
-          if (sides.data()[k] < -1 || sides.data()[k] >= nlabels) {
-            throw std::invalid_argument("label_quads: a side is not a label index");
-          }
-        }
         Vec<u8> cut(static_cast<size_t>(nq));
         Vec<i32> small;
         Vec<i64> large;
         std::vector<i64> off, inside;
         {
           nb::gil_scoped_release unlocked;
+          // checked in parallel, without the GIL: a pass over every corner
+          std::atomic<int> bad{0};
+          iso::parallel_for(nq, threads, 1 << 16, [&](int, i64 b, i64 e) {
+            int found = 0;
+            for (i64 k = 4 * b; k < 4 * e; ++k) {
+              found |= corners.data()[k] < 0 || corners.data()[k] >= nv;
+            }
+            for (i64 k = 2 * b; k < 2 * e; ++k) {
+              found |= (sides.data()[k] < -1 || sides.data()[k] >= nlabels) << 1;
+            }
+            if (found) bad |= found;
+          });
+          if (bad & 1) throw std::invalid_argument("label_quads: a corner is not a vertex");
+          if (bad & 2) throw std::invalid_argument("label_quads: a side is not a label index");
           quad_cuts(corners.data(), nq, vertices.data(), threads, cut.data());
           if (nq <= i64(std::numeric_limits<i32>::max())) {
             label_quads(sides.data(), nq, nlabels, small, off, inside);
@@ -1366,17 +1390,18 @@ void bind_labels(nb::module_ &m) {
       throw std::invalid_argument(
           "label_mesh: corners (Q, 4), cut (Q,), vertices (V, 3), 0 <= inside <= quads");
     }
-    for (i64 k = 0; k < n; ++k) {
-      const i64 q = i64(quads.data()[k]);
-      if (q < 0 || q >= nq) throw std::invalid_argument("label_mesh: a quad index is out of range");
-      for (int j = 0; j < 4; ++j) {
-        const i64 c = corners.data()[4 * q + j];
-        if (c < 0 || c >= nv) throw std::invalid_argument("label_mesh: a corner is not a vertex");
-      }
-    }
     OneLabel r;
     {
+      // checked with the GIL released: label files are written by several threads
       nb::gil_scoped_release unlocked;
+      for (i64 k = 0; k < n; ++k) {
+        const i64 q = i64(quads.data()[k]);
+        if (q < 0 || q >= nq) throw std::invalid_argument("label_mesh: a quad index is out of range");
+        for (int j = 0; j < 4; ++j) {
+          const i64 c = corners.data()[4 * q + j];
+          if (c < 0 || c >= nv) throw std::invalid_argument("label_mesh: a corner is not a vertex");
+        }
+      }
       label_mesh(corners.data(), cut.data(), vertices.data(), quads.data(), n, inside, r);
     }
     return nb::make_tuple(give(std::move(r.faces)), give(std::move(r.used)),

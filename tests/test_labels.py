@@ -372,3 +372,12 @@ def test_label_mesh_kernel_with_either_index_type_and_its_checks():
     with pytest.raises(ValueError, match="side is not a label"):
         _native.label_quads(net.corners, net.vertices, np.full((len(net.corners), 2), 9,
                             dtype=np.int32), 4, 1)  # fmt: skip
+    # a corner past the vertices, in the last quad: found by the threads' checks too
+    corners = net.corners.copy()
+    corners[-1, 2] = len(net.vertices)
+    with pytest.raises(ValueError, match="corner is not a vertex"):
+        _native.label_mesh(corners, net.cut, net.vertices, np.array([len(corners) - 1]), 0)
+    for threads in (1, 2):
+        sides = np.zeros((len(corners), 2), dtype=np.int32)
+        with pytest.raises(ValueError, match="corner is not a vertex"):
+            _native.label_quads(corners, net.vertices, sides, 4, threads)

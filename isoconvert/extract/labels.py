@@ -358,6 +358,10 @@ def label_surfaces(
     # a left-handed index-to-world map mirrors the surface: the kernel writes every quad reversed
     reverse = reversed_orientation(volume, False)
     itemsize = kernel_type(kernel_labels(np.zeros(1, volume.dtype)), "").itemsize
+    # an axis-aligned grid is placed by the kernel, in the pass that writes the
+    # positions, with the two roundings of Volume.index_to_world (a product, a sum)
+    aligned = np.array_equal(volume.direction, np.eye(3))
+    placed = False
     if wants_blocks(volume, blocks, itemsize):
         net = _net_in_slabs(volume, labels, background, options, reverse, blocks, itemsize,
                             on_status)  # fmt: skip
@@ -383,14 +387,17 @@ def label_surfaces(
                 float(options.constraint),
                 bool(reverse),
                 threads,
+                scale=volume.spacing if aligned else None,
+                shift=volume.origin if aligned else None,
             )
         )
+        placed = aligned
         del samples
     if len(corners) == 0:
         raise LevelError(f"{volume.source}: no label surface (every sample is background)")
     if (split or unresolved or outside) and on_status:
         on_status(_split_note(int(split), int(unresolved), int(outside)))
-    vertices = volume.index_to_world(positions)
+    vertices = positions if placed else volume.index_to_world(positions)
     cut, quads, offsets, inside = _native.label_quads(
         corners, vertices, sides, len(wanted), threads
     )

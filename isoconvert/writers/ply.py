@@ -81,7 +81,7 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
         return
     if len(columns) == 1:
         for block in row_chunks(verts):
-            fh.write(block.astype("<f8" if double else "<f4", copy=False).tobytes())
+            fh.write(np.ascontiguousarray(block, dtype="<f8" if double else "<f4"))
     else:
         fields = [("xyz", "<f8" if double else "<f4", (3,))]
         if mesh.normals is not None:
@@ -97,7 +97,7 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
                 out["normal"] = mesh.normals[a : a + ROWS]
             if mesh.values is not None:
                 out["value"] = mesh.values[a : a + ROWS]
-            fh.write(out.tobytes())
+            fh.write(out)
     fields = [("n", "u1"), ("v", "<i4", (3,))]
     if labels is not None:
         fields.append(("labels", "<i4", (2,)))
@@ -111,4 +111,4 @@ def write_ply(mesh: Mesh, fh: BinaryIO, ascii: bool = False) -> None:
                 out["labels"] = labels[i * ROWS : (i + 1) * ROWS]
         else:
             out = block.astype(record)
-        fh.write(out.tobytes())
+        fh.write(out)  # the array's memory, without a copy as bytes
