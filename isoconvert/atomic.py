@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import glob
 import os
+import platform
 import re
 import shutil
-import socket
 import stat
 import tempfile
 from collections.abc import Iterable, Iterator
@@ -379,7 +378,7 @@ def _owner_tag() -> str:
     """``HOST~PID`` of this process, in its temporary files' names: a file left by
     a process that died without cleaning up (SIGKILL, a power cut) can then be
     told from one still being written, on this host, by another process."""
-    host = re.sub(r"[^A-Za-z0-9-]", "", socket.gethostname())[:32] or "host"
+    host = re.sub(r"[^A-Za-z0-9-]", "", platform.node())[:32] or "host"
     return f"{host}~{os.getpid()}"
 
 
@@ -390,8 +389,14 @@ def _remove_stale_parts(folder: Path, stem: str) -> None:
     """Remove the temporary files of earlier writes of this output whose process,
     on this host, is gone (killed by SIGKILL, or the machine went down)."""
     host = _owner_tag().split("~")[0]
+    head = f".{stem}."  # the names atomic_output gives: .STEM.HOST~PID-XXXXXXXX.part
     try:
-        candidates = list(folder.glob(f".{glob.escape(stem)}.*.part"))
+        with os.scandir(folder) as entries:
+            candidates = [
+                Path(e.path)
+                for e in entries
+                if e.name.startswith(head) and e.name.endswith(".part")
+            ]
     except OSError:
         return
     for candidate in candidates:

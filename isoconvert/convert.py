@@ -19,8 +19,8 @@ import numpy as np
 from .atomic import check_output, output_stream, refuse_inputs, refuse_shared, refuse_stream
 from .errors import FormatError, IsoconvertError, OutputError
 from .extract.slabs import Blocks
-from .extract.tables import DEFAULT_AMBIGUITY
 from .mesh import Mesh
+from .methods import DEFAULT_AMBIGUITY
 from .post.pipeline import PostOptions, post_process
 from .readers import ReadOptions, read_volume
 from .volume import Volume

@@ -19,8 +19,8 @@ from .convert import (
     refuse_outputs_read,
 )
 from .errors import IsoconvertError
-from .extract.tables import DEFAULT_AMBIGUITY
 from .grid import grid_slab_zyx
+from .methods import DEFAULT_AMBIGUITY
 from .post.pipeline import EmptyMeshError, post_process
 from .threads import kernel_threads, threaded_in_order
 from .volume import Volume

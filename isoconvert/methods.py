@@ -25,6 +25,11 @@ PLUGIN_GROUP = "isoconvert.extractors"
 NO_DEGENERATE_OFFSET = 1e-3
 #: Rules for the ambiguous faces of cubes (the first is the default).
 AMBIGUITY_RULES = ("separate-positive", "separate-negative")
+#: The default rule. It is the one VTK's Marching Cubes / Flying Edges table and
+#: scikit-image's ``method="lorensen"`` follow (and, in 2D, ``find_contours``
+#: with its default ``fully_connected="low"``), so counts and connectivity agree
+#: with theirs (checked on real scans in the tests).
+DEFAULT_AMBIGUITY = AMBIGUITY_RULES[0]
 #: Rules for ambiguous squares: those of cubes, and the asymptotic decider.
 SQUARE_AMBIGUITY_RULES = (*AMBIGUITY_RULES, "asymptotic")
 #: The cubes' rule that follows the trilinear interpolant (faces by the

@@ -40,13 +40,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..methods import AMBIGUITY_RULES  # rules for a face whose diagonal corners share signs
-
-#: The default rule. It is the one VTK's Marching Cubes / Flying Edges table and
-#: scikit-image's ``method="lorensen"`` follow (and, in 2D, ``find_contours``
-#: with its default ``fully_connected="low"``), so counts and connectivity agree
-#: with theirs (checked on real scans in the tests).
-DEFAULT_AMBIGUITY = "separate-positive"
+from ..methods import (  # rules for a face whose diagonal corners share signs, the default
+    AMBIGUITY_RULES,
+    DEFAULT_AMBIGUITY,
+)
 
 #: (8, 3) int: offset of each cube vertex.
 CUBE_VERTICES = np.array([(v & 1, (v >> 1) & 1, (v >> 2) & 1) for v in range(8)], dtype=np.int64)
