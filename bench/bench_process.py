@@ -1,7 +1,8 @@
 """Whole commands: isoconvert against a scikit-image + trimesh script and a VTK script (issue 9).
 
 Run ``python bench/bench_process.py`` (``--quick`` for one round, ``--repeat N``). Each
-timing is one process from start to exit, as a user's shell sees it (``subprocess.run``;
+timing is one process from start to exit, as a user's shell sees it (started and waited
+for by a small interpreter of its own, :data:`TIMER`, which also reads its peak memory;
 interpreter start, imports, reading, extraction, writing), best and median of the rounds:
 
 - ``isoconvert --help``;
@@ -37,7 +38,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -119,22 +119,41 @@ class Command:
     peak_kib: int = 0
 
 
+#: Starts a command and prints its wall time, peak memory (KiB) and exit code. It
+#: runs in a small interpreter of its own: a child's peak includes that of the
+#: process it was forked from (Linux keeps the high-water mark across fork and
+#: exec), and a benchmark that measured distances in-process holds GBs.
+TIMER = (
+    "import os, subprocess, sys, time\n"
+    "start = time.perf_counter()\n"
+    "proc = subprocess.Popen(sys.argv[1:], stdout=subprocess.DEVNULL)\n"
+    "_, status, usage = os.wait4(proc.pid, 0)\n"
+    "print(time.perf_counter() - start, usage.ru_maxrss, os.waitstatus_to_exitcode(status))\n"
+)
+
+
+def timed_process(argv: list[str], env: dict[str, str] | None = None, stderr=None):
+    """Wall time (s), peak resident memory (KiB, the process's own) and exit code of
+    one run of ``argv`` (its output discarded, its error output to ``stderr``)."""
+    out = subprocess.run(
+        [sys.executable, "-c", TIMER, *argv], stdout=subprocess.PIPE, stderr=stderr,
+        env=env, text=True, check=True,
+    )  # fmt: skip
+    wall, peak_kib, code = out.stdout.split()
+    return float(wall), int(peak_kib), int(code)
+
+
 def run_once(cmd: Command) -> float | None:
     """Run a command to its end; its wall time in seconds, or None (and a note) if it
-    failed. Its peak resident memory (the process's own, from ``wait4``) raises
-    ``cmd.peak_kib``."""
-    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        start = time.perf_counter()
-        proc = subprocess.Popen(cmd.argv, stdout=out, stderr=err, env=cmd.env)
-        _, status, usage = os.wait4(proc.pid, 0)
-        seconds = time.perf_counter() - start
-        proc.returncode = os.waitstatus_to_exitcode(status)
-        cmd.peak_kib = max(cmd.peak_kib, int(usage.ru_maxrss))  # KiB on Linux
-        if proc.returncode != 0:
+    failed. Its peak resident memory (:func:`timed_process`) raises ``cmd.peak_kib``."""
+    with tempfile.TemporaryFile() as err:
+        seconds, peak_kib, code = timed_process(cmd.argv, cmd.env, err)
+        cmd.peak_kib = max(cmd.peak_kib, peak_kib)
+        if code != 0:
             err.seek(0)
             text = err.read().decode("utf-8", "replace")
             tail = (text.strip().splitlines() or ["no message"])[-1]
-            cmd.note = f"exit code {proc.returncode}: {tail}"
+            cmd.note = f"exit code {code}: {tail}"
             return None
     return seconds
 

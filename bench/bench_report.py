@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 
 from bench_extract import gyroid
+from bench_process import timed_process
 
 import isoconvert
 from isoconvert.report import check_mesh
@@ -54,27 +55,12 @@ def best(fn, repeat: int) -> tuple[float, object]:
     return min(times), result
 
 
-#: Starts a command and reports its wall time and peak memory. It runs in a small
-#: interpreter of its own: a child's peak includes that of the process it was forked
-#: from (Linux keeps the high-water mark across fork and exec), and this one's is GBs.
-TIMER = (
-    "import os, subprocess, sys, time\n"
-    "start = time.perf_counter()\n"
-    "proc = subprocess.Popen(sys.argv[1:], stdout=subprocess.DEVNULL)\n"
-    "_, status, usage = os.wait4(proc.pid, 0)\n"
-    "print(time.perf_counter() - start, usage.ru_maxrss, os.waitstatus_to_exitcode(status))\n"
-)
-
-
 def run_process(args: list[str]) -> tuple[float, int]:
     """Wall time (s) and peak resident memory (bytes) of one process."""
-    out = subprocess.run(
-        [sys.executable, "-c", TIMER, *args], capture_output=True, text=True, check=True
-    )
-    wall, peak_kib, code = out.stdout.split()
-    if int(code) != 0:
-        raise RuntimeError(f"{' '.join(args)} exited with {code}: {out.stderr}")
-    return float(wall), int(peak_kib) * 1024  # ru_maxrss is in KiB on Linux
+    wall, peak_kib, code = timed_process(args, stderr=subprocess.PIPE)
+    if code != 0:
+        raise RuntimeError(f"{' '.join(args)} exited with {code}")
+    return wall, peak_kib * 1024  # ru_maxrss is in KiB on Linux
 
 
 def main() -> None:
