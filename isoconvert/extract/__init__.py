@@ -1,4 +1,4 @@
-"""Extractors: one module per method and the table of built-ins below.
+"""Extractors: one module per method, and the table of built-ins in `dispatch.py`.
 
 Contract (for built-ins and plugins alike): an extractor is a function
 
