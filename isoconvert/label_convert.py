@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from .atomic import check_output, refuse_inputs, refuse_shared, refuse_stream
+from .atomic import check_output, output_stream, refuse_inputs, refuse_shared, refuse_stream
 from .convert import (
     ConvertOptions,
     ConvertResult,
@@ -117,13 +118,18 @@ def convert_labels(
     if not opts.labels:
         _check_label_volume(volume, opts.background)
     progress("extracting")
+    blocks = opts.blocks
+    if blocks.spill_dir is None:
+        # slabs over the budget wait beside the output (a stream's, in the temporary folder)
+        folder = tempfile.gettempdir() if output_stream(output) is not None else Path(output).parent
+        blocks = replace(blocks, spill_dir=Path(folder).resolve())
     surfaces = label_surfaces(
         volume,
         opts.labels or None,
         background=opts.background,
         smoothing=opts.label_smoothing,
         on_status=on_status,
-        blocks=opts.blocks,
+        blocks=blocks,
     )
     if opts.single_file:
         mesh = surfaces.combined

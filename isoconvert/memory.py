@@ -76,6 +76,28 @@ def keep_freed_memory() -> bool:
     return bool(mallopt(_M_ARENA_MAX, 1) and maps and trims)
 
 
+def release_freed_memory() -> bool:
+    """Give the memory the process has freed back to the system now (glibc's
+    ``malloc_trim``; elsewhere nothing happens).
+
+    :func:`keep_freed_memory` keeps it for the next arrays, which a run within
+    ``--max-memory`` cannot afford between its phases: the arrays of more than
+    32 MiB that the next phase makes come from maps of their own, not from what
+    the last phase freed. Returns whether anything was given back.
+    """
+    import ctypes
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        trim = ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return False
+    trim.argtypes, trim.restype = [ctypes.c_size_t], ctypes.c_int
+    return bool(trim(0))
+
+
 def available_memory() -> int | None:
     """Bytes of memory available to a new allocation (Linux MemAvailable), or None."""
     try:

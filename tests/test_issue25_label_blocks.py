@@ -198,3 +198,41 @@ def test_real_scan_files_and_layers_are_byte_identical(tmp_path):
     files = _files(tmp_path / "whole_layer")
     assert len(files) >= 4 and "mesh/255.index" in files
     assert _files(tmp_path / "slabs_layer") == files
+
+
+@pytest.mark.parametrize("iterations", [0, 3])
+def test_slabs_over_a_quarter_of_the_budget_wait_on_disk_and_merge_the_same(
+    tmp_path, monkeypatch, iterations
+):
+    """Past a quarter of --max-memory the slabs' merge-only arrays go to nameless
+    files in the spill folder: the net is still the in-memory one, bit for bit,
+    they were read back from disk (not kept), and nothing is left in the folder."""
+    rng = np.random.default_rng(5)
+    volume = Volume(_labels(rng, (9, 8, 30), 4, False), spacing=(0.5, 1.0, 2.0), origin=(1, 2, 3))
+    reference = label_surfaces(volume, smoothing=iterations)
+    spilled = []
+    original = label_blocks.LabelSlab.spill
+
+    def spill(self, folder):
+        original(self, folder)
+        assert all(getattr(self, name) is None for name in label_blocks.SPILLED)
+        spilled.append(folder)
+
+    monkeypatch.setattr(label_blocks.LabelSlab, "spill", spill)
+    blocks = Blocks(size=3, max_memory=4096, spill_dir=tmp_path)
+    _same(reference, label_surfaces(volume, smoothing=iterations, blocks=blocks))
+    assert len(spilled) >= 5 and set(spilled) == {tmp_path}
+    assert list(tmp_path.iterdir()) == []  # the files had no names, and are gone
+    # within a budget that holds them, nothing is spilled
+    spilled.clear()
+    roomy = Blocks(size=3, max_memory=1 << 30, spill_dir=tmp_path)
+    _same(reference, label_surfaces(volume, smoothing=iterations, blocks=roomy))
+    assert spilled == []
+
+
+def test_a_spill_folder_that_cannot_take_files_is_one_error(tmp_path):
+    volume = Volume(_labels(np.random.default_rng(2), (6, 6, 20), 3, False))
+    missing = tmp_path / "gone"
+    with pytest.raises(IsoconvertError, match="cannot make a temporary file there"):
+        label_surfaces(volume, smoothing=0, blocks=Blocks(size=3, max_memory=1024,
+                                                          spill_dir=missing))  # fmt: skip

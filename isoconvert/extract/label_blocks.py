@@ -39,12 +39,15 @@ never the volume.
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from .. import _native
+from ..atomic import DISK_FULL_ERRNOS, disk_full_error
 from ..errors import IsoconvertError, VolumeError
 from ..grid import SlabReader
 from ..runner import TaskFailure, cluster_size
@@ -68,6 +71,15 @@ _PIECE = 1 << 16
 
 #: Bits of a vertex key taken by the sheet (a dual cell has at most 12 sheets).
 SHEET_BITS = 4
+
+#: The arrays of a :class:`LabelSlab` that only the merge reads, which wait on
+#: disk once the slabs hold more than a quarter of ``--max-memory``.
+SPILLED = ("vertex_keys", "positions", "corners", "turned", "pairs")
+
+_SPILL_WHY = (
+    "for the label slabs, larger than a quarter of --max-memory (a larger one keeps "
+    "more of them in memory)"
+)
 
 
 def halo_layers(iterations: int) -> int:
@@ -172,6 +184,62 @@ class LabelSlab:
     split: int = 0
     unresolved: int = 0
     outside: int = 0
+    #: Where :meth:`spill` put the arrays only the merge reads: a nameless
+    #: temporary file and each array's offset in it (None: in memory).
+    spilled: tuple | None = field(default=None, repr=False)
+    vertex_count: int = -1
+
+    def __post_init__(self) -> None:
+        if self.vertex_count < 0:
+            self.vertex_count = len(self.vertex_keys)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the arrays held in memory."""
+        return sum(a.nbytes for a in vars(self).values() if isinstance(a, np.ndarray))
+
+    def spill(self, folder: Path) -> None:
+        """Move the arrays only the merge reads (:data:`SPILLED`) to a nameless
+        temporary file in ``folder`` (gone with the process, however it ends)."""
+        try:
+            fh = tempfile.TemporaryFile(dir=folder, prefix=".isoconvert-labels-")
+        except OSError as exc:
+            raise IsoconvertError(
+                f"{folder}: cannot make a temporary file there for the label slabs "
+                f"({exc.strerror}); set --max-memory higher or write elsewhere"
+            ) from None
+        offsets = {}
+        try:
+            for name in SPILLED:
+                offsets[name] = fh.tell()
+                np.save(fh, getattr(self, name), allow_pickle=False)
+            fh.flush()
+        except OSError as exc:
+            written = fh.tell()
+            fh.close()
+            if exc.errno in DISK_FULL_ERRNOS:
+                raise disk_full_error(folder, written, more=True, why=_SPILL_WHY) from None
+            raise IsoconvertError(
+                f"{folder}: writing the label slabs failed ({exc.strerror})"
+            ) from None
+        for name in SPILLED:
+            setattr(self, name, None)
+        self.spilled = (fh, offsets)
+
+    def restore(self, *names: str) -> None:
+        """Read the spilled arrays ``names`` back (nothing when in memory)."""
+        if self.spilled is None:
+            return
+        fh, offsets = self.spilled
+        for name in names:
+            fh.seek(offsets[name])
+            setattr(self, name, np.load(fh, allow_pickle=False))
+
+    def close(self) -> None:
+        """Give the spill file back."""
+        if self.spilled is not None:
+            self.spilled[0].close()
+            self.spilled = None
 
 
 @dataclass
@@ -375,6 +443,10 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
     """The whole volume's net from its slabs (in z order): the arrays of
     ``_native.label_net`` on the whole volume, in its order, to the bit.
 
+    Each slab's quads and vertices are put straight into their places in the
+    whole net, one slab at a time, and the slab lets go of them: the peak holds
+    the whole net and one slab's part, not the slabs' arrays end to end as well.
+
     Parameters
     ----------
     slabs : list of LabelSlab
@@ -386,10 +458,21 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
     IsoconvertError
         A quad corner that the next slab does not own (a bug, never a weld).
     """
-    starts = np.cumsum([0] + [len(s.vertex_keys) for s in slabs])
-    refs = []
+    starts = np.cumsum([0] + [s.vertex_count for s in slabs])
+    quad_starts = np.cumsum([0] + [len(s.quad_keys) for s in slabs])
+    nv, nq = int(starts[-1]), int(quad_starts[-1])
+    # where each slab's quads go: the inverse of the order of their keys (stable,
+    # so the quads of equal keys, never seen, would keep the slabs' order)
+    order = np.argsort(_take(slabs, "quad_keys"), kind="stable")
+    place = np.empty(nq, np.int64)
+    place[order] = np.arange(nq)
+    del order
+    corners = np.empty((nq, 4), np.int64)
+    turned = np.empty(nq, bool)
+    pairs = np.empty((nq, 2), np.int64)
     for n, slab in enumerate(slabs):
-        corners = slab.corners + starts[n]
+        slab.restore("corners", "turned", "pairs")
+        own = slab.corners + starts[n]
         if len(slab.next_keys):
             after = slabs[n + 1] if n + 1 < len(slabs) else None
             at = None if after is None else np.searchsorted(after.first_keys, slab.next_keys)
@@ -400,18 +483,15 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
                     "internal error: a label slab's quad uses a vertex no slab owns"
                 )
             shared = slab.corners < 0
-            corners[shared] = (starts[n + 1] + after.first_index[at])[-1 - slab.corners[shared]]
-        refs.append(corners)
-        slab.corners = None  # each slab's arrays go once merged: the peak holds one copy
-    order = np.argsort(_take(slabs, "quad_keys"), kind="stable")
-    whole = np.concatenate(refs)
-    del refs
-    corners = whole[order]
-    del whole
-    turned = _take(slabs, "turned")[order]
-    pairs = _take(slabs, "pairs")[order]
+            own[shared] = (starts[n + 1] + after.first_index[at])[-1 - slab.corners[shared]]
+        to = place[quad_starts[n] : quad_starts[n + 1]]
+        corners[to] = own
+        turned[to] = slab.turned
+        pairs[to] = slab.pairs
+        del own, to
+        slab.corners = slab.turned = slab.pairs = None
+    del place
     # vertices numbered by their first quad corner, quads not yet turned
-    nv = int(starts[-1])
     rank = _native.first_use_numbering(corners.reshape(-1), nv)
     if nv and rank.min() < 0:
         raise IsoconvertError("internal error: a label slab owns a vertex of no quad")
@@ -420,9 +500,15 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
         piece[:] = rank[piece]
     corners[turned] = corners[turned, ::-1]
     positions = np.empty((nv, 3))
-    positions[rank] = _take(slabs, "positions")
     dual_cells = np.empty(nv, np.int64)
-    dual_cells[rank] = _take(slabs, "vertex_keys") >> SHEET_BITS
+    for n, slab in enumerate(slabs):
+        slab.restore("positions", "vertex_keys")
+        to = rank[starts[n] : starts[n + 1]]
+        positions[to] = slab.positions
+        dual_cells[to] = slab.vertex_keys >> SHEET_BITS
+        slab.positions = slab.vertex_keys = None
+        slab.close()
+    del rank
     sides = np.searchsorted(wanted, pairs).astype(np.int32)
     found = sides < len(wanted)
     found[found] = wanted[sides[found]] == pairs[found]
@@ -488,6 +574,7 @@ def label_slab_task(job: LabelSlabJob, samples) -> LabelSlab | TaskFailure:
 
 __all__ = [
     "HALO_MARGIN",
+    "SPILLED",
     "LabelSlab",
     "LabelSlabJob",
     "MergedNet",

@@ -92,6 +92,7 @@ import numpy as np
 
 from .. import _native
 from ..errors import LevelError, VolumeError
+from ..memory import release_freed_memory
 from ..mesh import Mesh
 from ..threads import kernel_threads
 from ..volume import Volume
@@ -450,15 +451,31 @@ def _net_in_slabs(
         _wanted_labels(asked, labels, background, volume.source)
     jobs = slab_jobs(volume, asked, background, options.iterations, options.relaxation,
                      options.constraint, reverse, blocks, itemsize, on_status)  # fmt: skip
-    slabs = []
+    slabs: list = []
+    held = 0  # bytes of the slabs' arrays in memory
     results = run_slabs(volume, jobs, blocks.scheduler, blocks.budget)
     try:
-        slabs.extend(results)
+        for slab in results:
+            slabs.append(slab)
+            held += slab.nbytes
+            # past a quarter of the budget (as a mesh being built), the arrays only
+            # the merge reads wait on disk, and the memory they held goes back
+            if blocks.spill_dir is not None and held > blocks.budget // 4:
+                for waiting in slabs:
+                    if waiting.spilled is None:
+                        held -= waiting.nbytes
+                        waiting.spill(blocks.spill_dir)
+                        held += waiting.nbytes
+                release_freed_memory()
+        present = np.unique(np.concatenate([s.present for s in slabs]))
+        wanted, _ = _wanted_labels(present, labels, background, volume.source)
+        net = merge_slabs(slabs, wanted)
     finally:
         results.close()
-    present = np.unique(np.concatenate([s.present for s in slabs]))
-    wanted, _ = _wanted_labels(present, labels, background, volume.source)
-    return merge_slabs(slabs, wanted)
+        for slab in slabs:
+            slab.close()
+    release_freed_memory()  # the slabs' memory, which the net's large arrays do not reuse
+    return net
 
 
 # --- input ----------------------------------------------------------------------------
