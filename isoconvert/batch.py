@@ -927,15 +927,15 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
         job.name,
         job.output,
         "ok",
-        level=None if labels else float(results[0].mesh.info["level"]),
-        vertices=sum(r.mesh.n_vertices for r in results),
-        cells=sum(r.mesh.n_cells for r in results),
+        level=None if labels else float(results[0].summary.info["level"]),
+        vertices=sum(r.summary.n_vertices for r in results),
+        cells=sum(r.summary.n_cells for r in results),
         message=_made(len(results), labels, job.layer) if labels or job.layer else "",
     )
     notes = [outcome.message] if outcome.message else []
     checks: dict = {}
-    for result in results:
-        mesh = result.mesh
+    for result in results if require or settings.previews else ():
+        mesh = result.mesh  # a label's is built again here: results do not hold them
         grid = mesh.info.get("grid")
         report = None
         if require:

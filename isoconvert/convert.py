@@ -19,7 +19,7 @@ import numpy as np
 from .atomic import check_output, output_stream, refuse_inputs, refuse_shared, refuse_stream
 from .errors import FormatError, IsoconvertError, OutputError
 from .extract.slabs import Blocks
-from .mesh import Mesh
+from .mesh import Mesh, MeshSummary
 from .methods import DEFAULT_AMBIGUITY
 from .post.pipeline import PostOptions, post_process
 from .readers import ReadOptions, read_volume
@@ -164,7 +164,6 @@ class ConvertOptions:
         return replace(self, **changes)
 
 
-@dataclass
 class ConvertResult:
     """What :func:`convert` made; ``volume.notes`` says what the reader assumed.
 
@@ -172,7 +171,12 @@ class ConvertResult:
     ----------
     volume : Volume
     mesh : Mesh
-        The mesh written (extracted and post-processed), in float64.
+        The mesh written (extracted and post-processed), in float64. Given as a
+        function (a label's surface, rebuilt from the surface net when asked for),
+        it is built on each access and held only by whoever asked: a run over
+        many labels does not keep every label's mesh after its file is written.
+    summary : MeshSummary
+        The mesh's counts and ``info``, for a one-line account without the mesh.
     output : Path
     format : str
         The writer used.
@@ -182,12 +186,27 @@ class ConvertResult:
         The mesh as extracted, before post-processing (None when no step ran).
     """
 
-    volume: Volume
-    mesh: Mesh
-    output: Path
-    format: str
-    ascii: bool = False
-    extracted: Mesh | None = None
+    def __init__(
+        self,
+        volume: Volume,
+        mesh: Mesh | Callable[[], Mesh],
+        output: Path,
+        format: str,
+        ascii: bool = False,
+        extracted: Mesh | None = None,
+        summary: MeshSummary | None = None,
+    ) -> None:
+        if summary is None:
+            if not isinstance(mesh, Mesh):
+                raise TypeError("ConvertResult: a mesh given as a function needs its summary")
+            summary = MeshSummary.of(mesh)
+        self.volume, self._mesh, self.summary = volume, mesh, summary
+        self.output, self.format, self.ascii, self.extracted = output, format, ascii, extracted
+
+    @property
+    def mesh(self) -> Mesh:
+        mesh = self._mesh
+        return mesh if isinstance(mesh, Mesh) else mesh()
 
     @cached_property
     def written(self) -> Mesh:
@@ -196,6 +215,13 @@ class ConvertResult:
         against the volume's grid, so that it agrees with ``isoconvert check
         FILE`` (``check FILE --grid VOLUME`` for STL, which records no grid)."""
         return stored_mesh(self.mesh, self.format, self.ascii)
+
+    def __repr__(self) -> str:
+        s = self.summary
+        return (
+            f"ConvertResult({self.output}, {self.format}: {s.n_vertices} vertices, "
+            f"{s.n_cells} cells)"
+        )
 
 
 def convert(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -152,9 +153,9 @@ def convert_labels(
         for n, path in enumerate(outputs):  # every name before the first file is written
             # one folder: a file made there once shows the others can be too
             check_output(path, opts.force, inputs=volume.files, probe=n == 0)
-    # each label's surface is built when it is written (or post-processed): the
-    # memory of the ones written is reused for the next
-    meshes = list(surfaces.meshes.values()) if post.steps or writer.layer else None
+    # each label's surface is built when it is written and let go after: only the
+    # few in flight are held (post-processing holds every label's, see below)
+    meshes = list(surfaces.meshes.values()) if post.steps else None
     if post.steps:
         progress("post-processing")
         # every label before the first file: a step emptying one label's surface
@@ -168,14 +169,13 @@ def convert_labels(
                 raise EmptyMeshError(f"{volume.source}: label {label}: {text}") from None
     if writer.layer:
         progress("writing")
-        grid = meshes[0].info["grid"]  # the grid the net was extracted on
         largest = max(surfaces.labels)
         if opts.with_volume:  # every label of the volume is stored, not only those meshed
             largest = max(largest, int(surfaces.value_range[1]))
         write_precomputed(
             output,
-            dict(zip(surfaces.labels, meshes, strict=True)),
-            grid,
+            surfaces.meshes if meshes is None else dict(zip(surfaces.labels, meshes, strict=True)),
+            surfaces.grid,
             unit=volume.unit,
             data_type=volume_data_type(largest) if opts.with_volume else data_type_for(largest),
             lods=opts.layer_lods,
@@ -189,34 +189,38 @@ def convert_labels(
             on_status=on_status,
             map_objects=layer_objects_on(opts, volume.source),
         )
-    if writer.layer:  # each label's mesh is the layer's object of that id
+    made = surfaces.labels  # the labels extracted (``labels`` may name none)
+    if not writer.layer:  # (a layer's object files are the outputs named above)
+        progress("writing")
+
+        def write(n: int, label: int, path: Path) -> Path:
+            # in a worker thread: the label's mesh is built and written there, the
+            # kernels and the file leaving the interpreter to the next label's
+            mesh = meshes[n] if meshes is not None else surfaces.meshes[label]
+            return write_mesh(mesh, path, format=writer.name, ascii=opts.ascii, force=opts.force)
+
+        jobs = zip(range(len(made)), made, outputs, strict=True)
+        outputs = list(threaded_in_order(write, jobs, kernel_threads()))
+    if meshes is not None:  # post-processed: each result holds its label's mesh, both ways
         return [
             ConvertResult(
-                volume, mesh, path, writer.name, False, surfaces[label] if post.steps else None
-            )
-            for label, mesh, path in zip(surfaces.labels, meshes, outputs, strict=True)
-        ]
-    progress("writing")
-
-    def write(n: int, label: int, path: Path) -> Path:
-        # in a worker thread: the label's mesh is built and written there, the
-        # kernels and the file leaving the interpreter to the next label's
-        mesh = meshes[n] if meshes is not None else surfaces.meshes[label]
-        return write_mesh(mesh, path, format=writer.name, ascii=opts.ascii, force=opts.force)
-
-    made = surfaces.labels  # the labels extracted (``labels`` may name none)
-    jobs = zip(range(len(made)), made, outputs, strict=True)
-    written = threaded_in_order(write, jobs, kernel_threads())
-    results = []
-    for n, (label, path) in enumerate(zip(made, written, strict=True)):
-        extracted = surfaces[label]
-        mesh = meshes[n] if meshes is not None else extracted
-        results.append(
-            ConvertResult(
-                volume, mesh, path, writer.name, opts.ascii, extracted if post.steps else None
+                volume, mesh, path, writer.name, opts.ascii and not writer.layer, surfaces[label]
             )  # fmt: skip
-        )
-    return results
+            for label, mesh, path in zip(made, meshes, outputs, strict=True)
+        ]
+    # each result builds its label's mesh again when asked for (a report, a picture):
+    # held by the results, every label's mesh would be the peak of a large volume's run
+    return [
+        ConvertResult(
+            volume,
+            functools.partial(surfaces.__getitem__, label),
+            path,
+            writer.name,
+            opts.ascii and not writer.layer,
+            summary=surfaces.summary(label),
+        )  # fmt: skip
+        for label, path in zip(made, outputs, strict=True)
+    ]
 
 
 def _layer_object(label: int, legacy: bool) -> str:

@@ -384,6 +384,29 @@ class Mesh:
         return float(np.einsum("ij,ij->i", a, np.cross(b, d)).sum() / 6.0)
 
 
+@dataclass(frozen=True)
+class MeshSummary:
+    """What a one-line account of a mesh needs (``wrote X: V vertices, C triangles``),
+    without holding its arrays.
+
+    Attributes
+    ----------
+    n_vertices, n_cells : int
+    is_triangles : bool
+    info : dict
+        The mesh's provenance (shared with the mesh, not copied).
+    """
+
+    n_vertices: int
+    n_cells: int
+    is_triangles: bool
+    info: dict
+
+    @classmethod
+    def of(cls, mesh: Mesh) -> MeshSummary:
+        return cls(mesh.n_vertices, mesh.n_cells, mesh.is_triangles, mesh.info)
+
+
 def _import(module: str, package: str):
     """``module``, or a one-line IsoconvertError saying how to install ``package``."""
     import importlib

@@ -337,8 +337,18 @@ def test_per_label_mappings_are_built_once_on_access():
     assert mesh is result[7] is result.meshes[7] and list(result._meshes) == [7]
     assert not result._maps  # the maps only when asked for
     assert result.vertex_map[7] is result.vertex_map[7] and list(result._maps) == [7]
-    assert result[7] is mesh  # the same mesh, kept
-    assert result.face_map[5] is result.face_map[5] and list(result._meshes) == [7, 5]
+    assert result[7] is mesh  # the same mesh, while it is held
+    face_map = result.face_map[5]
+    assert result.face_map[5] is face_map and list(result._maps) == [7, 5]
+    assert list(result._meshes) == [7]  # label 5's mesh (built for its maps) is held by no one
+    # let go, a mesh is built again, the same: a run over many labels holds the few in use
+    vertices, cells, info = mesh.vertices.copy(), mesh.cells.copy(), mesh.info
+    assert result.summary(7).n_vertices == len(vertices) and result.summary(7).info == info
+    del mesh
+    assert not result._meshes
+    again = result[7]
+    assert np.array_equal(again.vertices, vertices) and np.array_equal(again.cells, cells)
+    assert again.info == info and result.summary(7).n_cells == len(cells)
     assert set(dict(result.meshes)) == {3, 5, 7, 9}
     assert [m.info["label"] for m in result.meshes.values()] == [3, 5, 7, 9]
     # each label's info is its own (no dict shared between labels)

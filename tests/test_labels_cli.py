@@ -66,6 +66,32 @@ def test_files_equal_the_api_and_share_boundaries(atlas, tmp_path):
     assert len(shared3 & shared7) == 2 * 18 * 12
 
 
+@pytest.mark.parametrize("format", ["ply", "precomputed"])
+def test_results_do_not_hold_every_label_mesh(atlas, tmp_path, format):
+    # a run over many labels keeps counts, not meshes: each mesh is built again,
+    # the same as the one written, when a result is asked for it
+    import gc
+    import weakref
+
+    path, labels = atlas
+    out = tmp_path / ("a.ply" if format == "ply" else "layer")
+    results = convert_labels(path, out, format=format)
+    surfaces = label_surfaces(Volume(labels, spacing=SPACING))
+    assert len(results) == 3
+    for result, value in zip(results, (3, 7, 9), strict=True):
+        mesh = result.mesh
+        held = weakref.ref(mesh)
+        assert result.summary.n_cells == len(surfaces[value].cells) == mesh.n_cells
+        assert result.summary.n_vertices == mesh.n_vertices and mesh.info["label"] == value
+        assert np.array_equal(mesh.cells, surfaces[value].cells)
+        assert np.array_equal(mesh.vertices, surfaces[value].vertices)
+        if format == "ply":
+            assert np.array_equal(read_mesh(result.output).cells, mesh.cells)
+        del mesh
+        gc.collect()
+        assert held() is None  # nothing but the caller held it
+
+
 def test_single_file_holds_both_labels_of_each_triangle(atlas, tmp_path):
     path, labels = atlas
     out = tmp_path / "a.vtp"

@@ -141,7 +141,7 @@ def convert(
     steps = options.post.steps
     for n, result in enumerate(results):
         if not quiet:
-            made = result.mesh
+            made = result.summary
             kind = "triangles" if made.is_triangles else "segments"
             kind = f"{kind}, {made.info['method']}"
             slabs = made.info.get("blocks", 1)
@@ -179,7 +179,8 @@ def _write_preview(
         stem, base = result.output.stem, Path(output).stem
         tail = stem[len(base) :] if stem.startswith(base) else f"_{stem}"
         target = preview.with_name(f"{preview.stem}{tail}.png")
-    picture = render_preview(result.mesh, checked=result.written, grid=result.mesh.info.get("grid"))
+    mesh = result.mesh  # a label's is built again: the results do not hold them
+    picture = render_preview(mesh, checked=result.written, grid=result.summary.info.get("grid"))
     write_preview(picture, target, force)
     if not quiet:
         print(f"wrote {target}: preview", file=sys.stderr)

@@ -19,7 +19,7 @@ def _report_result(result, target, required, examples, force, quiet) -> list[str
     Returns the required checks that failed."""
     from ..report import check_mesh
 
-    grid = result.mesh.info.get("grid")
+    grid = result.summary.info.get("grid")
     checked = check_mesh(result.written, examples=examples, source=str(result.output), grid=grid)
     changed = bound = None
     if result.extracted is not None and not (quiet and target in (None, "-")):
@@ -30,8 +30,8 @@ def _report_result(result, target, required, examples, force, quiet) -> list[str
         extracted = stored_mesh(result.extracted, result.format, result.ascii)
         before = check_mesh(extracted, examples=0, grid=grid).to_dict()
         changed = changes(before, checked.to_dict()) or ["nothing the report measures"]
-        changed += bound_lines(result.mesh.info)
-        bound = certified_bound(result.mesh.info)
+        changed += bound_lines(result.summary.info)
+        bound = certified_bound(result.summary.info)
         if not quiet:
             print(f"{result.output}: post-processing changed:", file=sys.stderr)
             for line in changed:

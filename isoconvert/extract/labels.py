@@ -85,6 +85,7 @@ from __future__ import annotations
 
 import copy
 import functools
+import weakref
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
@@ -93,7 +94,7 @@ import numpy as np
 from .. import _native
 from ..errors import LevelError, VolumeError
 from ..memory import release_freed_memory
-from ..mesh import Mesh
+from ..mesh import Mesh, MeshSummary
 from ..threads import kernel_threads
 from ..volume import Volume
 from .label_blocks import MergedNet, merge_slabs, run_slabs, slab_jobs, wants_blocks
@@ -139,9 +140,10 @@ class LabelMeshes:
     """Surfaces of the labels of a label volume, and the mesh they share.
 
     Each label's surface, and the combined mesh's triangles, are built from the
-    surface net the first time they are asked for (then kept): a caller writing
-    one file per label never holds the combined triangles, nor every label's
-    surface at once before the first file is written.
+    surface net when they are asked for: a caller writing one file per label
+    never holds the combined triangles, nor every label's surface at once. A
+    label's surface is kept while someone holds it (asked for again then, it is
+    the same object) and built again, the same, once nobody does.
 
     Attributes
     ----------
@@ -150,7 +152,7 @@ class LabelMeshes:
         label; its vertices are those of ``combined`` it uses, re-indexed
         compactly. ``info["label"]`` is the label value. A read-only mapping
         (``[]``, ``items()``, ``values()``, ``len()``, iteration in label order),
-        each mesh built on first access; ``dict(meshes)`` gives a dict.
+        each mesh built on access (see above); ``dict(meshes)`` gives a dict.
     combined : Mesh
         Every boundary quad once (two triangles), for ``--single-file``:
         ``vertices (V, 3) float64`` in world units, ``cells (C, 3) int64``
@@ -196,7 +198,9 @@ class LabelMeshes:
         value_range: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         self._net = net
-        self._meshes: dict[int, Mesh] = {}
+        # weakly: every label's mesh held at once is what made a large layer's peak
+        self._meshes: weakref.WeakValueDictionary[int, Mesh] = weakref.WeakValueDictionary()
+        self._summaries: dict[int, MeshSummary] = {}
         self._maps: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._combined: Mesh | None = None
         self._quad_labels = quad_labels  # (Q, 2): boundary_labels of each quad's two triangles
@@ -222,6 +226,16 @@ class LabelMeshes:
             cells = _native.label_triangles(net.corners, net.cut, kernel_threads())
             self._combined = Mesh(net.vertices, cells, None, net.info)
         return self._combined
+
+    @property
+    def grid(self) -> dict:
+        """The grid the net was extracted on (``info["grid"]`` of every mesh)."""
+        return self._net.info["grid"]
+
+    def summary(self, label: int) -> MeshSummary:
+        """Label ``label``'s surface's counts and info, kept from when it was built."""
+        summary = self._summaries.get(int(label))
+        return summary if summary is not None else MeshSummary.of(self.meshes[label])
 
     @property
     def labels(self) -> list[int]:
@@ -265,7 +279,9 @@ class LabelMeshes:
         info["level"] = float(label)
         info["label"] = int(label)
         info["smoothing"] = dict(net.info["smoothing"])
-        return Mesh(verts, local, None, info), used, faces
+        mesh = Mesh(verts, local, None, info)
+        self._summaries.setdefault(int(label), MeshSummary.of(mesh))
+        return mesh, used, faces
 
 
 @dataclass(frozen=True)
