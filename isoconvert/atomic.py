@@ -455,10 +455,11 @@ def free_space(path: str | Path) -> int | None:
 class DiskFullError(OutputError):
     """No room left at :attr:`path` for :attr:`needs` bytes (or more)."""
 
-    def __init__(self, message: str, path: str | Path, needs: int) -> None:
+    def __init__(self, message: str, path: str | Path, needs: int, why: str = "") -> None:
         super().__init__(message)
         self.path = path
         self.needs = needs
+        self.why = why  # what was being written (the message's clause)
 
 
 def disk_full_error(
@@ -479,6 +480,7 @@ def disk_full_error(
         f"disk full at {path}{told}{' ' + why if why else ''}; free space there or write elsewhere",
         path,
         needs,
+        why,
     )
 
 

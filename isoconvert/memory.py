@@ -210,6 +210,48 @@ def _write_zeros(fd: int, start: int, stop: int) -> None:
             done += os.pwrite(fd, zeros[: n - done], at + done)
 
 
+def file_array(shape: tuple[int, ...], dtype, folder: str | Path, why: str = "") -> np.ndarray:
+    """A zeroed array whose memory is a nameless temporary file in ``folder``.
+
+    For an array too large for the memory budget that is filled and read a part at
+    a time: :func:`release` gives back the pages touched so far, and the file keeps
+    what they held. The file has no name (nothing is left however the process
+    ends) and its disk blocks are reserved first (:meth:`FileMap.create`).
+
+    Parameters
+    ----------
+    shape : tuple of int
+    dtype : numpy dtype
+    folder : str or Path
+        Where the file is made (beside the output: the disk a run writes to).
+    why : str
+        What it holds, for a full disk's message.
+
+    Raises
+    ------
+    DiskFullError, OutputError
+        No room for it in ``folder``, or no file can be made there.
+    """
+    import tempfile
+
+    import numpy as np
+
+    dtype = np.dtype(dtype)
+    size = dtype.itemsize * int(np.prod(shape, dtype=np.int64))
+    if size == 0:
+        return np.zeros(shape, dtype)
+    try:
+        fh = tempfile.TemporaryFile(dir=folder, prefix=".isoconvert-array-")
+    except OSError as exc:
+        raise OutputError(
+            f"{folder}: cannot make a temporary file there ({exc.strerror}); set "
+            "--max-memory higher or write elsewhere"
+        ) from None
+    with fh:  # the map keeps the file (a duplicate of its descriptor)
+        mapped = FileMap.create(fh.fileno(), size, folder, why)
+    return np.frombuffer(mapped, dtype=dtype).reshape(shape)
+
+
 # --- arrays a block of rows at a time ----------------------------------------------------------
 
 

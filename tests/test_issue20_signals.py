@@ -12,6 +12,7 @@ folder (found through /proc, so the nameless spill files count too).
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import re
@@ -234,13 +235,12 @@ def test_terminated_batch_takes_its_workers_with_it(tmp_path, big_volume, signum
 # --- full disks ---------------------------------------------------------------------------------
 
 
-@pytest.fixture
-def small_disk(tmp_path):
-    """A 12 MiB tmpfs at tmp_path/full (needs root); unmounted afterwards."""
-    folder = tmp_path / "full"
+@contextlib.contextmanager
+def _tmpfs(folder: Path, size: str):
+    """A tmpfs of ``size`` at ``folder`` (needs root), unmounted afterwards."""
     folder.mkdir()
     mounted = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", "size=12m", "tmpfs", str(folder)],
+        ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)],
         capture_output=True,
         text=True,
     )
@@ -252,6 +252,13 @@ def small_disk(tmp_path):
         subprocess.run(["umount", str(folder)], capture_output=True)
         if os.path.ismount(folder):
             subprocess.run(["umount", "-l", str(folder)], capture_output=True)
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 12 MiB tmpfs at tmp_path/full (needs root); unmounted afterwards."""
+    with _tmpfs(tmp_path / "full", "12m") as folder:
+        yield folder
 
 
 DISK_FULL = re.compile(
@@ -298,6 +305,35 @@ def test_full_disk_while_the_mesh_spills_is_one_line(tmp_path, small_disk, big_v
     disk_full_line(done.stderr, small_disk)
     assert "the mesh being built" in done.stderr and "--max-memory" in done.stderr
     assert list(small_disk.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "size, budget, what",
+    [
+        ("12m", "4M", "for the label slabs"),
+        ("12m", "16M", "for the label slabs"),
+        # room for the slabs' files, not for them and the merged net's beside them
+        ("40m", "16M", "for the label surfaces' net"),
+    ],
+)
+def test_full_disk_while_label_slabs_and_their_net_wait_on_disk(tmp_path, size, budget, what):
+    """A label layer whose slabs and merged net (38 MB) wait beside the output on a
+    small disk: one line naming the disk and what filled it, exit 1, nothing left."""
+    labels = np.random.default_rng(4).integers(0, 4, (64, 64, 64)).astype(np.uint8)
+    np.save(tmp_path / "noise.npy", labels)
+    with _tmpfs(tmp_path / "disk", size) as disk:
+        done = subprocess.run(
+            [sys.executable, "-m", "isoconvert", "convert", str(tmp_path / "noise.npy")]
+            + ["--label", "1,2,3", "--format", "precomputed", "--smooth", "2"]
+            + ["--block-size", "8", "--max-memory", budget, "-o", str(disk / "layer"), "-q"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert done.returncode == 1, (done.returncode, done.stderr)
+        disk_full_line(done.stderr, disk)
+        assert what in done.stderr and "--max-memory" in done.stderr
+        assert list(disk.iterdir()) == []
 
 
 WRITERS = ["ply", "stl", "obj", "off", "vtp", "glb", "3mf"]

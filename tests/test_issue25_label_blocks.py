@@ -24,8 +24,10 @@ from isoconvert import read_volume
 from isoconvert.errors import IsoconvertError, LevelError, VolumeError
 from isoconvert.extract import label_blocks
 from isoconvert.extract.blocks import Blocks
+from isoconvert.extract.label_samples import narrowed_layers
 from isoconvert.extract.labels import label_surfaces
 from isoconvert.grid import RawGrid
+from isoconvert.memory import _file_map
 from isoconvert.volume import Volume
 
 
@@ -220,14 +222,84 @@ def test_slabs_over_a_quarter_of_the_budget_wait_on_disk_and_merge_the_same(
 
     monkeypatch.setattr(label_blocks.LabelSlab, "spill", spill)
     blocks = Blocks(size=3, max_memory=4096, spill_dir=tmp_path)
-    _same(reference, label_surfaces(volume, smoothing=iterations, blocks=blocks))
+    tight = label_surfaces(volume, smoothing=iterations, blocks=blocks)
+    _same(reference, tight)
     assert len(spilled) >= 5 and set(spilled) == {tmp_path}
-    assert list(tmp_path.iterdir()) == []  # the files had no names, and are gone
-    # within a budget that holds them, nothing is spilled
+    # the merged net, past its quarter too, lives in file-backed maps
+    net = tight._net
+    for array in (net.corners, net.vertices, tight.dual_cells, tight._quad_labels):
+        assert _file_map(array) is not None
+    assert list(tmp_path.iterdir()) == []  # the files had no names (and go with the maps)
+    # within a budget that holds them, nothing is spilled, and the net is in memory
     spilled.clear()
     roomy = Blocks(size=3, max_memory=1 << 30, spill_dir=tmp_path)
-    _same(reference, label_surfaces(volume, smoothing=iterations, blocks=roomy))
-    assert spilled == []
+    held = label_surfaces(volume, smoothing=iterations, blocks=roomy)
+    _same(reference, held)
+    assert spilled == [] and _file_map(held._net.corners) is None
+
+
+def test_label_slabs_are_read_in_the_narrowest_type(tmp_path, monkeypatch):
+    """A uint32 file of labels 0..3 is meshed from uint8 slabs (a quarter of the
+    memory), one with a value past 255 from uint16: the net is the same."""
+    rng = np.random.default_rng(8)
+    data = _labels(rng, (90, 12, 14), 3, True).astype(np.uint32)  # (Z, Y, X) in the file
+    wide = data.copy()
+    wide[70, 5, 5] = 300  # in a later slab, past uint8 after the first pieces
+    seen = []
+    original = label_blocks.run_label_slab
+
+    def recording(job, zyx):
+        seen.append((job.z0, zyx.dtype))
+        return original(job, zyx)
+
+    monkeypatch.setattr(label_blocks, "run_label_slab", recording)
+    for name, labels in (("narrow", data), ("wide", wide)):
+        np.save(tmp_path / f"{name}.npy", labels)
+        seen.clear()
+        blocks = Blocks(size=20, max_memory=1 << 30)
+        got = label_surfaces(read_volume(tmp_path / f"{name}.npy"), smoothing=2, blocks=blocks)
+        _same(label_surfaces(Volume(labels.T), smoothing=2), got)
+        types = {dtype for _, dtype in seen}
+        if name == "narrow":
+            assert types == {np.dtype(np.uint8)}
+        else:  # the slabs holding z = 70 in uint16 (the file's type is never needed)
+            assert types == {np.dtype(np.uint8), np.dtype(np.uint16)}
+            assert all((dtype == np.uint16) == (z0 <= 70) for z0, dtype in seen if z0 > 40)
+
+
+@pytest.mark.parametrize(
+    "values, background, expected",
+    [
+        ([0, 7, 255], 0, np.uint8),
+        ([0, 7, 256], 0, np.uint16),  # widened when a later piece needs it
+        ([-3, 100], 0, np.int8),
+        ([0, 40], -1, np.int8),  # the background must fit too
+        ([0, 40], 70000, np.uint32),  # nothing narrower holds it
+        ([-40000, 1], 0, np.int32),
+    ],
+)
+def test_narrowed_layers_pick_the_narrowest_type_that_holds_every_value(
+    values, background, expected
+):
+    stored = np.int32 if min(values) < 0 else np.uint32
+    zyx = np.zeros((20, 3, 4), stored)
+    zyx[15, 1, 2] = values[-1]  # in the last piece of 8 layers
+    zyx[2, 0, 0] = values[0]
+    zyx[9, 2, 3] = values[1]
+    reads = []
+
+    def read(a, b):
+        reads.append((a, b))
+        return zyx[a:b]
+
+    out = narrowed_layers(read, 1, 19, background)
+    assert out.dtype == expected
+    assert np.array_equal(out, zyx[1:19]) and reads == [(1, 9), (9, 17), (17, 19)]
+    # floats and one-byte labels are what a read of the whole range gives
+    for same in (zyx.astype(np.float32), zyx.astype(np.int8)):
+        whole = narrowed_layers(lambda a, b, same=same: same[a:b], 0, 20, 0)
+        assert whole.dtype == same.dtype and np.shares_memory(whole, same)
+        assert whole.shape == same.shape
 
 
 def test_a_spill_folder_that_cannot_take_files_is_one_error(tmp_path):

@@ -33,8 +33,15 @@ The whole volume's order is rebuilt from keys, never from positions:
 Slabs run here, the next one read while one is built, or as tasks of a Dask
 cluster (:func:`isoconvert.extract.slabs.dask_runner` with
 :func:`label_slab_task`); the client merges what they return
-(:func:`merge_slabs`). Memory holds a few slabs and the surfaces being merged,
-never the volume.
+(:func:`merge_slabs`). Memory holds a few slabs, never the volume: read from
+its file, a slab's samples are held in the narrowest type that holds its labels
+(:func:`~isoconvert.extract.label_samples.narrowed_layers`); when the slabs'
+arrays would pass a quarter of the budget, those only the merge reads wait in
+nameless files as each slab comes, and so does the merged net
+(:func:`~isoconvert.memory.file_array`), whose pages are given back after each
+step and each label's surface. What is not bounded by the budget: a slab's own
+kernel working memory (about 200 MB for a 512^2 slab at 16 iterations, its
+halo included), and each label's surface while it is written.
 """
 
 from __future__ import annotations
@@ -49,12 +56,13 @@ import numpy as np
 from .. import _native
 from ..atomic import DISK_FULL_ERRNOS, disk_full_error
 from ..errors import IsoconvertError, VolumeError
-from ..grid import SlabReader
+from ..grid import LazyGrid, SlabReader
+from ..memory import file_array, release
 from ..runner import TaskFailure, cluster_size
 from ..runner.local import read_ahead
 from ..threads import kernel_threads
 from ..volume import Volume
-from .label_samples import fit_background, kernel_labels
+from .label_samples import fit_background, kernel_labels, narrowed_layers
 from .prepare import kernel_type
 
 # slabs per cluster thread, and copies of a slab's samples alive at once (the one
@@ -75,6 +83,11 @@ SHEET_BITS = 4
 #: The arrays of a :class:`LabelSlab` that only the merge reads, which wait on
 #: disk once the slabs hold more than a quarter of ``--max-memory``.
 SPILLED = ("vertex_keys", "positions", "corners", "turned", "pairs")
+
+_NET_WHY = (
+    "for the label surfaces' net, larger than a quarter of --max-memory (a larger one "
+    "keeps it in memory)"
+)
 
 _SPILL_WHY = (
     "for the label slabs, larger than a quarter of --max-memory (a larger one keeps "
@@ -439,7 +452,9 @@ def _empty_slab(vmin: float, vmax: float, present: np.ndarray) -> LabelSlab:
     )
 
 
-def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
+def merge_slabs(
+    slabs: list[LabelSlab], wanted: np.ndarray, folder: Path | None = None
+) -> MergedNet:
     """The whole volume's net from its slabs (in z order): the arrays of
     ``_native.label_net`` on the whole volume, in its order, to the bit.
 
@@ -452,12 +467,25 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
     slabs : list of LabelSlab
     wanted : (L,) int64
         The labels extracted, sorted (``sides`` index them).
+    folder : Path or None
+        Where the net's large arrays live, in nameless temporary files
+        (:func:`~isoconvert.memory.file_array`), for a net larger than the memory
+        budget allows: the pages each step touched are given back after it. None:
+        in memory.
 
     Raises
     ------
     IsoconvertError
         A quad corner that the next slab does not own (a bug, never a weld).
+    DiskFullError
+        No room in ``folder`` for the net.
     """
+
+    def array(shape: tuple[int, ...], dtype) -> np.ndarray:
+        if folder is None:
+            return np.empty(shape, dtype)
+        return file_array(shape, dtype, folder, _NET_WHY)
+
     starts = np.cumsum([0] + [s.vertex_count for s in slabs])
     quad_starts = np.cumsum([0] + [len(s.quad_keys) for s in slabs])
     nv, nq = int(starts[-1]), int(quad_starts[-1])
@@ -467,9 +495,9 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
     place = np.empty(nq, np.int64)
     place[order] = np.arange(nq)
     del order
-    corners = np.empty((nq, 4), np.int64)
+    corners = array((nq, 4), np.int64)
     turned = np.empty(nq, bool)
-    pairs = np.empty((nq, 2), np.int64)
+    pairs = array((nq, 2), np.int64)
     for n, slab in enumerate(slabs):
         slab.restore("corners", "turned", "pairs")
         own = slab.corners + starts[n]
@@ -490,17 +518,34 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
         pairs[to] = slab.pairs
         del own, to
         slab.corners = slab.turned = slab.pairs = None
+    # each slab's quads land all over the net: its pages stay until every slab's are in
     del place
     # vertices numbered by their first quad corner, quads not yet turned
     rank = _native.first_use_numbering(corners.reshape(-1), nv)
+    release(corners)
     if nv and rank.min() < 0:
         raise IsoconvertError("internal error: a label slab owns a vertex of no quad")
-    for a in range(0, len(corners), _PIECE):  # renumbered in place: no second copy
+    sides = np.empty((nq, 2), np.int32)
+    for a in range(0, nq, _PIECE):  # in place, a piece at a time: no second copy
         piece = corners[a : a + _PIECE]
         piece[:] = rank[piece]
-    corners[turned] = corners[turned, ::-1]
-    positions = np.empty((nv, 3))
-    dual_cells = np.empty(nv, np.int64)
+        flip = turned[a : a + _PIECE]
+        piece[flip] = piece[flip, ::-1]
+        # each side's index among the labels extracted, -1 for none of them
+        labels = pairs[a : a + _PIECE]
+        side = np.searchsorted(wanted, labels)
+        found = side < len(wanted)
+        found[found] = wanted[side[found]] == labels[found]
+        side[~found] = -1
+        sides[a : a + _PIECE] = side
+        if a % (_PIECE << 6) == 0:  # every 64 pieces, what they touched
+            release(corners[: a + _PIECE])
+            release(pairs[: a + _PIECE])
+    release(corners)
+    release(pairs)
+    del turned
+    positions = array((nv, 3), np.float64)
+    dual_cells = array((nv,), np.int64)
     for n, slab in enumerate(slabs):
         slab.restore("positions", "vertex_keys")
         to = rank[starts[n] : starts[n + 1]]
@@ -508,11 +553,9 @@ def merge_slabs(slabs: list[LabelSlab], wanted: np.ndarray) -> MergedNet:
         dual_cells[to] = slab.vertex_keys >> SHEET_BITS
         slab.positions = slab.vertex_keys = None
         slab.close()
+        release(positions)
+        release(dual_cells)
     del rank
-    sides = np.searchsorted(wanted, pairs).astype(np.int32)
-    found = sides < len(wanted)
-    found[found] = wanted[sides[found]] == pairs[found]
-    sides[~found] = -1
     present = np.unique(np.concatenate([s.present for s in slabs]))
     return MergedNet(
         positions=positions,
@@ -551,9 +594,15 @@ def run_slabs(volume: Volume, jobs: list[LabelSlabJob], scheduler: str | None, b
 
 def _run_here(source, jobs: list[LabelSlabJob]) -> Iterator[LabelSlab]:
     reader = SlabReader(source)
-    for job, zyx in read_ahead(
-        jobs, lambda job: reader.read(job.z0, job.z1), lambda job: reader.ready(job.z0, job.z1)
-    ):
+
+    def read(job: LabelSlabJob) -> np.ndarray:
+        if not isinstance(source, LazyGrid):  # in memory: a view, no copy
+            return reader.read(job.z0, job.z1)
+        # read from its file: in the narrowest type (a uint32 atlas of 40 labels
+        # holds a quarter of the memory per slab, the one built and the next read)
+        return narrowed_layers(reader.read, job.z0, job.z1, job.background)
+
+    for job, zyx in read_ahead(jobs, read, lambda job: reader.ready(job.z0, job.z1)):
         yield run_label_slab(job, zyx)
         del zyx
 

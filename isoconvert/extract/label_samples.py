@@ -3,6 +3,8 @@ slab-by-slab nets)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from ..errors import VolumeError
@@ -41,4 +43,64 @@ def fit_background(samples: np.ndarray, background: int) -> np.ndarray:
     return samples.astype(wide)
 
 
-__all__ = ["fit_background", "kernel_labels"]
+#: Integer types a slab of labels may be narrowed to, narrowest first (kernel types all).
+_NARROW_TYPES = (np.uint8, np.int8, np.uint16, np.int16)
+
+#: Layers read and narrowed at once by :func:`narrowed_layers` (a few MB: in cache).
+NARROW_LAYERS = 8
+
+
+def narrowed_layers(
+    read: Callable[[int, int], np.ndarray],
+    k0: int,
+    k1: int,
+    background: int,
+    step: int = NARROW_LAYERS,
+) -> np.ndarray:
+    """Layers ``k0 <= k < k1`` of integer labels in the narrowest integer type that
+    holds them and ``background``, read ``step`` layers at a time.
+
+    A label volume stored wider than its labels need (a 40-label atlas as uint32)
+    would otherwise hold four bytes per sample in each slab in memory; the kernel
+    gives the same net for any type that holds the values (they are compared, never
+    computed with). Only ``step`` layers are ever held in the stored type.
+
+    Parameters
+    ----------
+    read : callable
+        ``read(a, b)``: layers ``a .. b - 1`` as a ``(b - a, Y, X)`` array.
+    k0, k1 : int
+    background : int
+    step : int
+
+    Returns
+    -------
+    (k1 - k0, Y, X) array
+        A fresh array, or what ``read(k0, k1)`` gives for samples that are not
+        integers or are one byte already.
+    """
+    first = read(k0, min(k0 + step, k1))
+    dtype = first.dtype
+    if not np.issubdtype(dtype, np.integer) or dtype.itemsize == 1 or k1 <= k0:
+        return first if k1 <= k0 + step else read(k0, k1)
+    lo = hi = int(background)
+    out = None
+    for a in range(k0, k1, step):
+        piece = first if a == k0 else read(a, min(a + step, k1))
+        if piece.size:
+            lo, hi = min(lo, int(piece.min())), max(hi, int(piece.max()))
+        fits = next(
+            (t for t in _NARROW_TYPES
+             if np.dtype(t).itemsize < dtype.itemsize
+             and np.iinfo(t).min <= lo and hi <= np.iinfo(t).max),
+            dtype,
+        )  # fmt: skip
+        if out is None:
+            out = np.empty((k1 - k0, *piece.shape[1:]), fits)
+        elif out.dtype != fits:  # a value beyond the type so far: wider from now on
+            out = out.astype(fits)
+        out[a - k0 : a - k0 + len(piece)] = piece
+    return out
+
+
+__all__ = ["NARROW_LAYERS", "fit_background", "kernel_labels", "narrowed_layers"]

@@ -92,8 +92,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _native
+from ..atomic import DiskFullError, disk_full_error, free_space
 from ..errors import LevelError, VolumeError
-from ..memory import release_freed_memory
+from ..memory import release, release_freed_memory
 from ..mesh import Mesh, MeshSummary
 from ..threads import kernel_threads
 from ..volume import Volume
@@ -275,6 +276,8 @@ class LabelMeshes:
         faces, used, local, verts = _native.label_mesh(
             net.corners, net.cut, net.vertices, net.quads[q0:q1], int(net.inside[n])
         )
+        release(net.corners)  # a net on disk: one label's pages at a time
+        release(net.vertices)
         info = copy.deepcopy(net.label_info)
         info["level"] = float(label)
         info["label"] = int(label)
@@ -414,10 +417,13 @@ def label_surfaces(
         raise LevelError(f"{volume.source}: no label surface (every sample is background)")
     if (split or unresolved or outside) and on_status:
         on_status(_split_note(int(split), int(unresolved), int(outside)))
-    vertices = positions if placed else volume.index_to_world(positions)
+    vertices = positions if placed else volume.index_to_world(positions)  # (in place)
     cut, quads, offsets, inside = _native.label_quads(
         corners, vertices, sides, len(wanted), threads
     )
+    del sides
+    for array in (vertices, corners, quad_labels, dual_cells):
+        release(array)  # (a net on disk: the pages read so far)
 
     info = mesh_info(volume, "labels", _level_text(wanted), flip=False)
     info["labels"] = [int(v) for v in wanted]
@@ -468,28 +474,49 @@ def _net_in_slabs(
     jobs = slab_jobs(volume, asked, background, options.iterations, options.relaxation,
                      options.constraint, reverse, blocks, itemsize, on_status)  # fmt: skip
     slabs: list = []
-    held = 0  # bytes of the slabs' arrays in memory
+    held = made = 0  # bytes of the slabs' arrays in memory, and as made
+    full = None  # (folder, what) of a full disk
+    spilling = False
     results = run_slabs(volume, jobs, blocks.scheduler, blocks.budget)
     try:
         for slab in results:
             slabs.append(slab)
             held += slab.nbytes
-            # past a quarter of the budget (as a mesh being built), the arrays only
-            # the merge reads wait on disk, and the memory they held goes back
-            if blocks.spill_dir is not None and held > blocks.budget // 4:
+            made += slab.nbytes
+            # when all the slabs' arrays would pass a quarter of the budget (as a
+            # mesh being built), those only the merge reads wait on disk, each
+            # slab's as it comes: held, they would take the memory of the next
+            # slabs' kernels (200 MB for a 512^2 slab at 16 iterations)
+            spilling = spilling or made * len(jobs) > blocks.budget // 4 * len(slabs)
+            if blocks.spill_dir is None:
+                continue
+            if spilling:
                 for waiting in slabs:
                     if waiting.spilled is None:
                         held -= waiting.nbytes
                         waiting.spill(blocks.spill_dir)
                         held += waiting.nbytes
-                release_freed_memory()
+            # kept, the kernel's freed memory would stay beside the next slab's,
+            # which is laid out elsewhere in the heap
+            release_freed_memory()
         present = np.unique(np.concatenate([s.present for s in slabs]))
         wanted, _ = _wanted_labels(present, labels, background, volume.source)
-        net = merge_slabs(slabs, wanted)
+        # the net waits on disk as a mesh being built does, past a quarter of the budget
+        net_bytes = sum(48 * len(s.quad_keys) + 32 * s.vertex_count for s in slabs)
+        spill = blocks.spill_dir is not None and net_bytes > blocks.budget // 4
+        if spill:  # what the slabs' kernels freed, for the net's pages
+            release_freed_memory()
+        net = merge_slabs(slabs, wanted, blocks.spill_dir if spill else None)
+    except DiskFullError as exc:
+        full = exc.path, exc.why
     finally:
         results.close()
         for slab in slabs:
             slab.close()
+    if full is not None:
+        # told once this run's files there are gone (the slabs', the net's): then
+        # all the space the disk has was not enough
+        raise disk_full_error(full[0], free_space(full[0]) or 0, more=True, why=full[1])
     release_freed_memory()  # the slabs' memory, which the net's large arrays do not reuse
     return net
 
