@@ -24,6 +24,7 @@
 #include <atomic>
 #include <cstring>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
 #include "bind.hpp"
@@ -590,14 +591,22 @@ class Net {
       }
     });
     if (stencil) nboff[size_t(nv)] = ne;
+    // the cells of two or more vertices (few), for the count below: smooth() gives
+    // the cells back before its buffers are made
+    std::vector<std::pair<i64, int>> split_vertices;
+    for (const Cell *c : split_cells) split_vertices.emplace_back(c->first, c->nsheets);
     Vec<double> pos = smooth(cell_of, junction, nb, nboff, split_cells);
+    // the stencil is not read again: its memory is the output's below
+    Vec<i64>().swap(nb);
+    Vec<i64>().swap(nboff);
+    Vec<u8>().swap(junction);
     // copies that still coincide (none seen in tests): the note counts them
     const i64 layer = (X_ + 1) * (Y_ + 1);
-    for (const Cell *c : split_cells) {
-      if (!counted(cell_of[size_t(c->first)] / layer)) continue;
-      for (int s = 1; s < c->nsheets; ++s) {
+    for (const auto &[first, nsheets] : split_vertices) {
+      if (!counted(cell_of[size_t(first)] / layer)) continue;
+      for (int s = 1; s < nsheets; ++s) {
         for (int t = 0; t < s; ++t) {
-          const double *a = &pos[size_t(3 * (c->first + s))], *b = &pos[size_t(3 * (c->first + t))];
+          const double *a = &pos[size_t(3 * (first + s))], *b = &pos[size_t(3 * (first + t))];
           out.unresolved += a[0] == b[0] && a[1] == b[1] && a[2] == b[2];
         }
       }
@@ -1036,6 +1045,15 @@ class Net {
     }
   }
 
+  // The cells, their rows and the column counts, which nothing reads once the
+  // quads, the stencil and the starting positions are made: given back before
+  // the smoothing's buffers are (a slab's peak is there).
+  void release_cells() {
+    std::vector<Chunk>().swap(chunks_);
+    std::vector<Row>().swap(rows_);
+    for (auto &c : count_) std::vector<i64>().swap(c);
+  }
+
   // Constrained relaxation (Jacobi): see labels.py. Junction vertices follow
   // junction neighbours only and stay put where junction curves meet.
   Vec<double> smooth(const Vec<i64> &cell_of, const Vec<u8> &junction, Vec<i64> &nb,
@@ -1055,6 +1073,7 @@ class Net {
       }
     });
     step_split_copies(split_cells, pos);
+    release_cells();
     if (o_.iterations == 0 || nb.empty()) return pos;
     std::vector<i32> degree(size_t(nv), 0);  // 0: the vertex stays put
     iso::parallel_for(nv, o_.threads, 1 << 15, [&](int, i64 b, i64 e) {
