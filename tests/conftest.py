@@ -149,3 +149,23 @@ def vtk_flying_edges(zyx: np.ndarray, level: float):
     points = numpy_support.vtk_to_numpy(out.GetPoints().GetData()).astype(np.float64)
     cells = numpy_support.vtk_to_numpy(out.GetPolys().GetConnectivityArray()).reshape(-1, 3)
     return points, cells
+
+
+def cli_peak_mib(*args: str) -> float:
+    """The peak resident memory (MiB) of ``isoconvert ARGS`` in a process of its own,
+    which must succeed: its own high-water mark, read as it ends (``ru_maxrss`` of a
+    child would count the parent's, from before exec)."""
+    import subprocess
+
+    code = (
+        "import sys\n"
+        "from isoconvert.cli import main\n"
+        "assert main() == 0\n"
+        "peak = [x for x in open('/proc/self/status') if x.startswith('VmHWM')][0]\n"
+        "print(int(peak.split()[1]) / 1024, file=sys.stderr)\n"
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    return float(run.stderr.strip().splitlines()[-1])

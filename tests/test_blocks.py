@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import read_real_scan, real_scan_names
+from conftest import cli_peak_mib, read_real_scan, real_scan_names
 
 import isoconvert
 from isoconvert import Volume, extract
@@ -275,40 +275,13 @@ def test_memory_stays_within_the_budget(tmp_path):
     """A 256 MiB volume converted with --max-memory 16M: the process's peak
     resident memory stays under what the same command needs for a 2 MiB
     volume plus the budget plus 16 MiB, far below the volume."""
-    import subprocess
-    import sys
 
     def peak_mib(path: str, *extra: str) -> float:
-        code = (
-            "import sys\n"
-            "from isoconvert.cli import main\n"
-            "assert main() == 0\n"
-            # this process's own peak (ru_maxrss would count the parent's, from before exec)
-            "peak = [x for x in open('/proc/self/status') if x.startswith('VmHWM')][0]\n"
-            "print(int(peak.split()[1]) / 1024, file=sys.stderr)\n"
-        )
         out = tmp_path / "out.ply"
         out.unlink(missing_ok=True)
-        run = subprocess.run(
-            [
-                sys.executable,
-                "-c",
-                code,
-                "convert",
-                path,
-                "-o",
-                str(out),
-                "--level",
-                "0.5",
-                "--quiet",
-                *extra,
-            ],
-            capture_output=True,
-            text=True,
-        )
-        assert run.returncode == 0, run.stderr
+        peak = cli_peak_mib("convert", path, "-o", out, "--level", "0.5", "--quiet", *extra)
         assert out.stat().st_size > 100_000  # a real mesh was written
-        return float(run.stderr.strip().splitlines()[-1])
+        return peak
 
     def volume(name: str, nz: int) -> str:
         n = 256

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import dataset
+from conftest import cli_peak_mib, dataset
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -308,3 +308,39 @@ def test_a_spill_folder_that_cannot_take_files_is_one_error(tmp_path):
     with pytest.raises(IsoconvertError, match="cannot make a temporary file there"):
         label_surfaces(volume, smoothing=0, blocks=Blocks(size=3, max_memory=1024,
                                                           spill_dir=missing))  # fmt: skip
+
+
+def test_a_label_layer_twice_the_budget_stays_within_it(tmp_path):
+    """A 512 MiB uint32 label volume (six balls, some touching) to a one-level layer
+    within --max-memory 128M: the peak stays under what the same command needs for a tiny
+    volume plus the budget plus 16 MiB (as for isosurfaces, tests/test_blocks.py),
+    with the slabs read in one byte a sample and the merged net on disk; the layer
+    is the in-memory one's bytes."""
+    n, nz = 512, 512
+    centres = [(150, 150, 130, 90), (330, 150, 130, 90), (256, 360, 260, 100),
+               (150, 150, 380, 80), (330, 330, 400, 70), (256, 256, 256, 40)]  # fmt: skip
+    y, x = np.meshgrid(np.arange(n, dtype=np.float32), np.arange(n, dtype=np.float32),
+                       indexing="ij")  # fmt: skip
+    path = tmp_path / "balls.npy"
+    with open(path, "wb") as fh:  # (Z, Y, X) in the file, written a layer at a time
+        np.lib.format.write_array_header_1_0(
+            fh, {"descr": "<u4", "fortran_order": False, "shape": (nz, n, n)}
+        )
+        for z in range(nz):
+            layer = np.zeros((n, n), np.uint32)
+            for label, (cx, cy, cz, r) in enumerate(centres, start=1):
+                layer[(x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2 < r * r] = label
+            fh.write(layer.tobytes())
+    tiny = tmp_path / "tiny.npy"
+    np.save(tiny, np.pad(np.ones((4, 4, 4), np.uint32), 2))
+    # one level: coarser ones are decimated an object at a time, whole (not bounded
+    # by the budget: about 500 bytes a triangle; see the README)
+    common = ["--labels", "--format", "precomputed", "--lods", "1", "-q"]
+    small = cli_peak_mib("convert", tiny, *common, "-o", tmp_path / "tiny_layer")
+    big = cli_peak_mib("convert", path, *common, "--max-memory", "128M", "-o", tmp_path / "within")
+    assert big < small + 128 + 16, (small, big)
+    whole = _cli("convert", path, *common, "-o", tmp_path / "whole", cwd=tmp_path)
+    assert whole.returncode == 0, whole.stderr
+    files = _files(tmp_path / "whole")
+    assert len(files) == 1 + 1 + 2 * len(centres)  # info, mesh/info, a manifest and fragments each
+    assert _files(tmp_path / "within") == files
