@@ -249,6 +249,7 @@ def file_array(shape: tuple[int, ...], dtype, folder: str | Path, why: str = "")
         ) from None
     with fh:  # the map keeps the file (a duplicate of its descriptor)
         mapped = FileMap.create(fh.fileno(), size, folder, why)
+    mapped.fd = -1  # closed: never grown (a reused descriptor must not be written)
     return np.frombuffer(mapped, dtype=dtype).reshape(shape)
 
 
