@@ -12,7 +12,6 @@ folder (found through /proc, so the nameless spill files count too).
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import os
 import re
@@ -24,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import dataset
+from conftest import dataset, small_tmpfs
 
 from isoconvert.cli import main
 
@@ -235,29 +234,10 @@ def test_terminated_batch_takes_its_workers_with_it(tmp_path, big_volume, signum
 # --- full disks ---------------------------------------------------------------------------------
 
 
-@contextlib.contextmanager
-def _tmpfs(folder: Path, size: str):
-    """A tmpfs of ``size`` at ``folder`` (needs root), unmounted afterwards."""
-    folder.mkdir()
-    mounted = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)],
-        capture_output=True,
-        text=True,
-    )
-    if mounted.returncode != 0:
-        pytest.skip(f"cannot mount a small tmpfs to fill: {mounted.stderr.strip()}")
-    try:
-        yield folder
-    finally:
-        subprocess.run(["umount", str(folder)], capture_output=True)
-        if os.path.ismount(folder):
-            subprocess.run(["umount", "-l", str(folder)], capture_output=True)
-
-
 @pytest.fixture
 def small_disk(tmp_path):
     """A 12 MiB tmpfs at tmp_path/full (needs root); unmounted afterwards."""
-    with _tmpfs(tmp_path / "full", "12m") as folder:
+    with small_tmpfs(tmp_path / "full", "12m") as folder:
         yield folder
 
 
@@ -321,7 +301,7 @@ def test_full_disk_while_label_slabs_and_their_net_wait_on_disk(tmp_path, size, 
     small disk: one line naming the disk and what filled it, exit 1, nothing left."""
     labels = np.random.default_rng(4).integers(0, 4, (64, 64, 64)).astype(np.uint8)
     np.save(tmp_path / "noise.npy", labels)
-    with _tmpfs(tmp_path / "disk", size) as disk:
+    with small_tmpfs(tmp_path / "disk", size) as disk:
         done = subprocess.run(
             [sys.executable, "-m", "isoconvert", "convert", str(tmp_path / "noise.npy")]
             + ["--label", "1,2,3", "--format", "precomputed", "--smooth", "2"]

@@ -561,6 +561,57 @@ def test_a_sharded_layer_holds_the_same_objects(tmp_path):
             assert np.array_equal(a.faces, b.faces) and np.array_equal(a.vertices, b.vertices)
 
 
+def _balls(n: int = 10) -> dict:
+    """The meshes of n^3 labels, a ball of its own in each 8^3 cell."""
+    z, y, x = np.mgrid[: 8 * n, : 8 * n, : 8 * n]
+    cell = (z // 8) * n * n + (y // 8) * n + x // 8 + 1
+    ball = ((z % 8 - 3.5) ** 2 + (y % 8 - 3.5) ** 2 + (x % 8 - 3.5) ** 2) < 3.2**2
+    result = label_surfaces(Volume.from_zyx(np.where(ball, cell, 0).astype(np.uint16)))
+    assert len(result.meshes) == n**3
+    return dict(result.meshes)
+
+
+def test_a_sharded_layer_does_not_hold_its_objects_in_memory(tmp_path):
+    """The objects' bytes wait on disk until the shards are put together: writing
+    1000 small objects allocates (tracemalloc) well under the layer's size, where
+    holding every object's bytes, then joining a shard from them, takes twice it;
+    cloud-volume reads the objects back."""
+    import tracemalloc
+
+    n = 10
+    meshes = _balls(n)
+    grid = next(iter(meshes.values())).info["grid"]
+    tracemalloc.start()
+    try:
+        write_precomputed(tmp_path / "layer", meshes, grid, sharded=True)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    files = sorted((tmp_path / "layer" / "mesh").iterdir())
+    assert [f.name for f in files] == ["0.shard", "info"]  # the spill file is gone
+    assert peak < 0.6 * files[0].stat().st_size
+    cv = _cloud(tmp_path / "layer")
+    for label in (1, 500, n**3):
+        back = cv.mesh.get(label, lod=0)
+        back = back[label] if isinstance(back, dict) else back
+        assert len(back.faces) == meshes[label].n_cells
+
+
+@pytest.mark.parametrize("size", ["1m", "2m"])
+def test_a_full_disk_while_objects_wait_for_their_shard_is_one_line(tmp_path, size):
+    """A 1.2 MB sharded layer on a tmpfs of 1 MiB (full while the objects wait on
+    disk) or 2 MiB (full while the shard is put together from them): the one-line
+    disk-full error, and the tmpfs is empty again."""
+    from conftest import small_tmpfs
+
+    meshes = _balls()
+    grid = next(iter(meshes.values())).info["grid"]
+    with small_tmpfs(tmp_path / "full", size) as disk:
+        with pytest.raises(OutputError, match="disk full at"):
+            write_precomputed(disk / "layer", meshes, grid, sharded=True)
+        assert list(disk.iterdir()) == []
+
+
 def test_the_layer_does_not_depend_on_the_thread_count(tmp_path, labelled, monkeypatch):
     """Objects are encoded side by side on threads; the files are the same bytes."""
     _, result = labelled

@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 
@@ -356,8 +357,13 @@ def write_precomputed(
                 _check_mesh(int(segment), mesh)
                 yield (mesh.vertices, mesh.cells, origin, inverse, lods, bits, chunk, decimate)
 
-        objects = {}
+        # sharded: each object's bytes wait in one file of the part folder as they
+        # come (a layer of millions of objects does not fit in memory), and the
+        # shards are put together from it at the end
         with contextlib.ExitStack() as stack:
+            spill = None
+            if spec is not None:
+                spill = stack.enter_context(_ObjectSpill(work / "mesh" / ".objects"))
             if map_objects is None:
                 # objects side by side: the coarser levels' collapses are most of the
                 # work, and their kernels leave the interpreter free
@@ -373,10 +379,46 @@ def write_precomputed(
                     (work / "mesh" / f"{int(segment)}.index").write_bytes(manifest)
                     (work / "mesh" / f"{int(segment)}").write_bytes(data)
                 else:
-                    objects[int(segment)] = (data, manifest)
-        if spec is not None:
-            _write_shards(work / "mesh", objects, spec)
+                    spill.add(int(segment), data, manifest)
+            if spill is not None:
+                _write_shards(work / "mesh", spill, spec)
     return folder
+
+
+class _ObjectSpill:
+    """Objects' fragment data and manifests in one file, read back one at a time.
+
+    Parameters
+    ----------
+    path : Path
+        The file (in the layer's part folder, so a failed run leaves nothing).
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._file = open(path, "w+b")  # noqa: SIM115 (closed by __exit__)
+        self._at = 0
+        #: segment -> (offset, fragment data bytes, manifest bytes)
+        self.sizes: dict[int, tuple[int, int, int]] = {}
+
+    def add(self, segment: int, data: bytes, manifest: bytes) -> None:
+        self._file.write(data)
+        self._file.write(manifest)
+        self.sizes[segment] = (self._at, len(data), len(manifest))
+        self._at += len(data) + len(manifest)
+
+    def read(self, segment: int) -> bytes:
+        """The object's fragment data followed by its manifest."""
+        at, data, manifest = self.sizes[segment]
+        self._file.flush()
+        return os.pread(self._file.fileno(), data + manifest, at)
+
+    def __enter__(self) -> _ObjectSpill:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._file.close()
+        self.path.unlink(missing_ok=True)
 
 
 def encode_object(
@@ -459,30 +501,31 @@ def _sharding(objects: int) -> dict:
     }
 
 
-def _write_shards(folder: Path, objects: dict[int, tuple[bytes, bytes]], spec: dict) -> None:
+def _write_shards(folder: Path, objects: _ObjectSpill, spec: dict) -> None:
     """The shard files of sharded.md: per shard, the shard index, then each object's
     fragment data followed by its manifest (the minishard index points at the
-    manifest, as meshes.md asks), then the gzip-encoded minishard indices."""
+    manifest, as meshes.md asks), then the gzip-encoded minishard indices. The
+    layout comes from the objects' sizes; their bytes are copied one at a time."""
     import gzip
 
     minishards = 1 << spec["minishard_bits"]
     shards: dict[int, dict[int, list[int]]] = {}
-    for segment in sorted(objects):  # identity hash, no preshift
+    for segment in sorted(objects.sizes):  # identity hash, no preshift
         minishard = segment & (minishards - 1)
         shard = (segment >> spec["minishard_bits"]) & ((1 << spec["shard_bits"]) - 1)
         shards.setdefault(shard, {}).setdefault(minishard, []).append(segment)
     digits = max(1, -(-spec["shard_bits"] // 4))
     for shard, by_minishard in shards.items():
-        body, indices, at = [], [], 0
+        order, indices, at = [], [], 0
         for minishard in range(minishards):
             ids = by_minishard.get(minishard, [])
             starts, sizes = [], []
             for segment in ids:
-                data, manifest = objects[segment]
-                body += [data, manifest]
-                starts.append(at + len(data))
-                sizes.append(len(manifest))
-                at += len(data) + len(manifest)
+                _, data, manifest = objects.sizes[segment]
+                order.append(segment)
+                starts.append(at + data)
+                sizes.append(manifest)
+                at += data + manifest
             indices.append((ids, starts, sizes))
         index, tail, place = [], [], at
         for ids, starts, sizes in indices:
@@ -499,8 +542,12 @@ def _write_shards(folder: Path, objects: dict[int, tuple[bytes, bytes]], spec: d
             index.append((place, place + len(encoded)))
             tail.append(encoded)
             place += len(encoded)
-        head = np.array(index, dtype="<u8").tobytes()
-        (folder / f"{shard:0{digits}x}.shard").write_bytes(b"".join([head, *body, *tail]))
+        with open(folder / f"{shard:0{digits}x}.shard", "wb") as out:
+            out.write(np.array(index, dtype="<u8").tobytes())
+            for segment in order:
+                out.write(objects.read(segment))
+            for encoded in tail:
+                out.write(encoded)
 
 
 def _check_mesh(segment: int, mesh: Mesh) -> None:
