@@ -399,6 +399,8 @@ def _convert_levels_to_layer(
         force=opts.force,
         on_status=on_status,
         map_objects=layer_objects_on(opts, volume.source),
+        # within --max-memory, one object's coarser levels at a time
+        object_threads=1 if opts.blocks.max_memory else None,
     )
     name = (lambda n: f"{n}:0") if opts.legacy_mesh else str
     return [

@@ -188,6 +188,8 @@ def convert_labels(
             force=opts.force,
             on_status=on_status,
             map_objects=layer_objects_on(opts, volume.source),
+            # within --max-memory, one object's coarser levels at a time
+            object_threads=1 if opts.blocks.max_memory else None,
         )
     made = surfaces.labels  # the labels extracted (``labels`` may name none)
     if not writer.layer:  # (a layer's object files are the outputs named above)

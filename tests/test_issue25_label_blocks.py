@@ -344,3 +344,38 @@ def test_a_label_layer_twice_the_budget_stays_within_it(tmp_path):
     files = _files(tmp_path / "whole")
     assert len(files) == 1 + 1 + 2 * len(centres)  # info, mesh/info, a manifest and fragments each
     assert _files(tmp_path / "within") == files
+
+
+def test_within_the_budget_a_layers_objects_are_encoded_one_at_a_time(tmp_path, monkeypatch):
+    """Each object encoded holds its coarser levels' collapses (about 500 bytes a
+    triangle): within --max-memory one object at a time, else side by side on
+    the kernels' threads; the same bytes either way, for labels and for levels."""
+    pytest.importorskip("DracoPy")
+    pytest.importorskip("meshoptimizer")
+    from isoconvert.cli import main
+    from isoconvert.writers import precomputed
+
+    monkeypatch.setenv("ISOCONVERT_THREADS", "2")
+    at_once = []
+    original = precomputed.threaded_in_order
+
+    def recording(function, arguments, threads):
+        at_once.append(threads)
+        return original(function, arguments, threads)
+
+    monkeypatch.setattr(precomputed, "threaded_in_order", recording)
+    labels = np.zeros((24, 20, 22), np.uint16)
+    labels[3:12, 4:15, 3:18], labels[12:21, 5:16, 6:19] = 1, 2  # two boxes, touching
+    np.save(tmp_path / "labels.npy", labels)
+    layer = ["--format", "precomputed", "--lods", "2", "-q"]
+    for kind in (["--labels"], ["--level", "1.5"]):
+        made = {}
+        for budget in ([], ["--max-memory", "64M"]):
+            at_once.clear()
+            out = tmp_path / f"{kind[0]}{len(budget)}"
+            code = main(["convert", str(tmp_path / "labels.npy"), *kind, *layer, *budget,
+                         "-o", str(out)])  # fmt: skip
+            assert code == 0
+            assert at_once == ([1] if budget else [2])
+            made[bool(budget)] = _files(out)
+        assert made[True] == made[False]

@@ -224,6 +224,7 @@ def write_precomputed(
     force: bool = False,
     on_status: Callable[[str], None] | None = None,
     map_objects: ObjectMap | None = None,
+    object_threads: int | None = None,
 ) -> Path:
     """Write meshes as one Neuroglancer precomputed segmentation layer.
 
@@ -273,6 +274,10 @@ def write_precomputed(
         tuple of ``arguments`` (an iterable), the results in their order; where the
         objects are encoded (a Dask cluster's workers, say). None: here, objects side
         by side on threads when there are coarser levels to decimate.
+    object_threads : int or None
+        Objects encoded here at once; None: as many as the kernels' threads when
+        there are coarser levels to decimate (each holds its object's collapses),
+        else 1.
 
     Returns
     -------
@@ -367,7 +372,7 @@ def write_precomputed(
             if map_objects is None:
                 # objects side by side: the coarser levels' collapses are most of the
                 # work, and their kernels leave the interpreter free
-                threads = kernel_threads() if lods > 1 else 1
+                threads = object_threads or (kernel_threads() if lods > 1 else 1)
                 done = threaded_in_order(encode_object, arguments(), threads)
                 stack.callback(done.close)
             else:
