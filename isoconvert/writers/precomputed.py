@@ -58,7 +58,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 
@@ -407,6 +406,7 @@ class _ObjectSpill:
         self.sizes: dict[int, tuple[int, int, int]] = {}
 
     def add(self, segment: int, data: bytes, manifest: bytes) -> None:
+        self._file.seek(self._at)
         self._file.write(data)
         self._file.write(manifest)
         self.sizes[segment] = (self._at, len(data), len(manifest))
@@ -415,8 +415,8 @@ class _ObjectSpill:
     def read(self, segment: int) -> bytes:
         """The object's fragment data followed by its manifest."""
         at, data, manifest = self.sizes[segment]
-        self._file.flush()
-        return os.pread(self._file.fileno(), data + manifest, at)
+        self._file.seek(at)
+        return self._file.read(data + manifest)
 
     def __enter__(self) -> _ObjectSpill:
         return self
