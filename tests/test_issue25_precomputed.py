@@ -482,6 +482,34 @@ def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, labelled, monkeypa
     assert list(tmp_path.iterdir()) == []
 
 
+def test_force_replaces_a_layer_never_a_folder_of_other_files(tmp_path, labelled):
+    """--force on a folder that is no layer (someone's files) is a one-line error that
+    leaves every file; an empty folder and an earlier layer are replaced."""
+    _, result = labelled
+    grid = next(iter(result.meshes.values())).info["grid"]
+    mine = tmp_path / "documents"
+    (mine / "sub").mkdir(parents=True)
+    (mine / "thesis.txt").write_text("important")
+    (mine / "sub" / "a").write_text("x")
+    (mine / "info").write_text("not a layer's")
+    with pytest.raises(OutputError, match="not a Neuroglancer layer"):
+        write_precomputed(mine, result.meshes, grid, unit="µm", force=True)
+    assert (mine / "thesis.txt").read_text() == "important"
+    assert sorted(p.name for p in mine.rglob("*")) == ["a", "info", "sub", "thesis.txt"]
+    np.save(tmp_path / "labels.npy", _atlas(16, 2))
+    run = subprocess.run(
+        [sys.executable, "-m", "isoconvert", "convert", str(tmp_path / "labels.npy"), "--labels",
+         "--format", "precomputed", "-o", str(mine), "--force", "-q"],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert run.returncode != 0 and len(run.stderr.strip().splitlines()) == 1, run.stderr
+    assert "not a Neuroglancer layer" in run.stderr and (mine / "sub" / "a").exists()
+    (tmp_path / "empty").mkdir()
+    for _ in range(2):  # an empty folder, then the layer written there
+        write_precomputed(tmp_path / "empty", result.meshes, grid, unit="µm", force=True)
+        assert (tmp_path / "empty" / "mesh" / "info").is_file()
+
+
 def test_the_part_folder_of_a_killed_run_is_removed(tmp_path, labelled):
     from isoconvert.atomic import _owner_tag
 

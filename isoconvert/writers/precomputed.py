@@ -144,6 +144,7 @@ def check_layer(
         raise OutputError(f"{folder} exists and is not a layer folder; give a folder name")
     if folder.exists() and not force:
         raise OutputError(f"{folder} exists; pass --force to replace it")
+    _check_replaceable(folder)
     if folder.is_dir():
         inside = folder.resolve()
         for path in inputs:
@@ -153,6 +154,22 @@ def check_layer(
                     f"{folder} holds the input {path}; replacing the layer would delete it: "
                     "write the layer elsewhere"
                 )
+
+
+def _check_replaceable(folder: Path) -> None:
+    """Refuse to replace a folder that is not a precomputed layer: ``--force``
+    replaces a layer (or an empty folder), never a folder of someone's files."""
+    if not folder.is_dir() or not any(folder.iterdir()):
+        return
+    try:
+        info = json.loads((folder / "info").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        info = None
+    if not (isinstance(info, dict) and info.get("@type") == "neuroglancer_multiscale_volume"):
+        raise OutputError(
+            f"{folder} is a folder that is not a Neuroglancer layer (no layer info file); "
+            "--force replaces only layers: give the layer a new folder name"
+        )
 
 
 def _check_legacy(legacy: bool, lods: int, chunk: float | None, sharded: bool) -> None:
@@ -313,6 +330,7 @@ def write_precomputed(
     folder = Path(folder)
     if folder.exists() and not force:
         raise OutputError(f"{folder} exists; pass --force to replace it")
+    _check_replaceable(folder)
     transform, nm = layer_transform(clean, unit, voxel_frame=volume is not None)
     if meters_per_unit(unit) is None and on_status:
         on_status("note: the volume's unit is unknown; the layer takes one unit as 1 nm")
