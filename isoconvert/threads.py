@@ -4,9 +4,11 @@ settings of a process that runs one command (:func:`prepare_process`)."""
 from __future__ import annotations
 
 import os
+import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FuturesTimeout
 from typing import Any
 
 from .errors import IsoconvertError
@@ -45,6 +47,24 @@ def kernel_threads() -> int:
     return min(threads, cpus)
 
 
+#: Set while an interrupted caller of :func:`threaded_in_order` waits for the calls
+#: running: their long loops (a decimation's collapses) stop at the next step
+#: instead of running to the end (a Ctrl-C once waited two minutes for two objects'
+#: collapses).
+_interrupted = threading.Event()
+
+
+class Abandoned(Exception):
+    """Raised in a worker thread whose run was interrupted; nobody reads it."""
+
+
+def stop_if_interrupted() -> None:
+    """A step of long work in a worker thread: raise :class:`Abandoned` when the run
+    that started it was interrupted (the main thread has the signal)."""
+    if _interrupted.is_set():
+        raise Abandoned()
+
+
 def threaded_in_order(
     function: Callable[..., Any], arguments: Iterable[tuple], threads: int, window: int = 0
 ) -> Iterator[Any]:
@@ -56,7 +76,8 @@ def threaded_in_order(
     ``arguments`` that builds each item when asked for holds only those in flight
     (``Executor.map`` takes every argument first). When the caller stops early (an
     error, an interrupt in the main thread), the calls not started are cancelled and
-    those running are waited for: none is left half done. One thread: called here.
+    those running are waited for: none is left half done; on an interrupt, those that
+    call :func:`stop_if_interrupted` stop at their next step. One thread: called here.
     """
     if threads <= 1:
         for args in arguments:
@@ -64,17 +85,36 @@ def threaded_in_order(
         return
     window = window or 2 * threads
     pending: deque = deque()
-    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="isoconvert") as pool:
+    interrupted = False
+    try:
+        with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="isoconvert") as pool:
+            try:
+                for args in arguments:
+                    pending.append(pool.submit(function, *args))
+                    if len(pending) >= window:
+                        yield _result(pending.popleft())
+                while pending:
+                    yield _result(pending.popleft())
+            except KeyboardInterrupt:
+                interrupted = True
+                _interrupted.set()  # the calls running stop at their next step
+                raise
+            finally:
+                for future in pending:
+                    future.cancel()
+    finally:
+        if interrupted:
+            _interrupted.clear()
+
+
+def _result(future: Future) -> Any:
+    """The future's result, waited for in short steps: a wait without a timeout is
+    not woken by a signal here (Linux), so a Ctrl-C would wait for the call."""
+    while True:
         try:
-            for args in arguments:
-                pending.append(pool.submit(function, *args))
-                if len(pending) >= window:
-                    yield pending.popleft().result()
-            while pending:
-                yield pending.popleft().result()
-        finally:
-            for future in pending:
-                future.cancel()
+            return future.result(timeout=0.2)
+        except FuturesTimeout:
+            continue
 
 
 def prepare_process() -> None:

@@ -13,7 +13,7 @@ import pytest
 from isoconvert.atomic import check_output
 from isoconvert.errors import OutputError
 from isoconvert.label_convert import convert_labels
-from isoconvert.threads import threaded_in_order
+from isoconvert.threads import Abandoned, stop_if_interrupted, threaded_in_order
 
 
 @pytest.mark.parametrize("threads", [1, 2, 3])
@@ -61,6 +61,39 @@ def test_an_error_cancels_the_calls_not_started_and_waits_for_those_running():
     assert started - {2} == finished
     # ... and most were never started
     assert len(started) < 20
+
+
+def test_an_interrupt_stops_the_calls_running_at_their_next_step():
+    """Ctrl-C while long calls run on the threads: the calls that check
+    stop_if_interrupted give up at their next step (a decimation's next collapse),
+    so the interrupt is not held up until they finish; a later run is not stopped."""
+    import signal
+
+    steps, ends = [], []
+
+    def long_call(n):
+        try:
+            for step in range(300):  # 30 s when nothing stops it
+                stop_if_interrupted()
+                steps.append(step)
+                time.sleep(0.1)
+            ends.append("finished")
+        except Abandoned:
+            ends.append("abandoned")
+
+    timer = threading.Timer(0.5, signal.raise_signal, (signal.SIGINT,))
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            list(threaded_in_order(long_call, ((n,) for n in range(4)), 2))
+    finally:
+        timer.cancel()
+    assert ends == ["abandoned", "abandoned"]  # the two running; the others never started
+    assert len(steps) < 2 * 300
+    got = list(
+        threaded_in_order(lambda n: (stop_if_interrupted(), n)[1], ((n,) for n in range(3)), 2)
+    )
+    assert got == [0, 1, 2]
 
 
 def test_label_files_written_side_by_side_equal_those_of_one_thread(tmp_path, monkeypatch):

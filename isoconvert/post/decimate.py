@@ -40,7 +40,7 @@ from ..errors import IsoconvertError
 from ..geometry import flat_triangles
 from ..graph import connected_components, row_groups, row_hashes, topology
 from ..mesh import Mesh
-from ..threads import kernel_threads
+from ..threads import kernel_threads, stop_if_interrupted
 
 _NEEDS = "decimation needs meshoptimizer: pip install 'isoconvert[simplify]'"
 #: Collapses (each with more vertices locked, or a tighter limit) before giving the
@@ -192,6 +192,7 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
     library_error = 0.0
     # no triangles: nothing to collapse or to bound (the input is the answer)
     while attempts < _MAX_ATTEMPTS and n_cells:
+        stop_if_interrupted()  # on a worker thread of an interrupted run
         attempts += 1
         out, library_error = simplify(indices, positions, locked, target, limit, options)
         new_problems = guard.new_problems(out)

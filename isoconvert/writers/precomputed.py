@@ -144,7 +144,6 @@ def check_layer(
         raise OutputError(f"{folder} exists and is not a layer folder; give a folder name")
     if folder.exists() and not force:
         raise OutputError(f"{folder} exists; pass --force to replace it")
-    _check_replaceable(folder)
     if folder.is_dir():
         inside = folder.resolve()
         for path in inputs:
@@ -154,6 +153,7 @@ def check_layer(
                     f"{folder} holds the input {path}; replacing the layer would delete it: "
                     "write the layer elsewhere"
                 )
+    _check_replaceable(folder)
 
 
 def _check_replaceable(folder: Path) -> None:
