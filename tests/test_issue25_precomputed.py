@@ -14,6 +14,7 @@ import time
 import numpy as np
 import pytest
 import trimesh
+from conftest import small_tmpfs
 from scipy.spatial import cKDTree
 
 from isoconvert.errors import IsoconvertError, OutputError
@@ -630,8 +631,6 @@ def test_a_full_disk_while_objects_wait_for_their_shard_is_one_line(tmp_path, si
     """A 1.2 MB sharded layer on a tmpfs of 1 MiB (full while the objects wait on
     disk) or 2 MiB (full while the shard is put together from them): the one-line
     disk-full error, and the tmpfs is empty again."""
-    from conftest import small_tmpfs
-
     meshes = _balls()
     grid = next(iter(meshes.values())).info["grid"]
     with small_tmpfs(tmp_path / "full", size) as disk:
