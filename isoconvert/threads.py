@@ -92,9 +92,9 @@ def threaded_in_order(
                 for args in arguments:
                     pending.append(pool.submit(function, *args))
                     if len(pending) >= window:
-                        yield _result(pending.popleft())
+                        yield wait_for(pending.popleft())
                 while pending:
-                    yield _result(pending.popleft())
+                    yield wait_for(pending.popleft())
             except KeyboardInterrupt:
                 interrupted = True
                 _interrupted.set()  # the calls running stop at their next step
@@ -107,9 +107,10 @@ def threaded_in_order(
             _interrupted.clear()
 
 
-def _result(future: Future) -> Any:
+def wait_for(future: Future) -> Any:
     """The future's result, waited for in short steps: a wait without a timeout is
-    not woken by a signal here (Linux), so a Ctrl-C would wait for the call."""
+    not woken by a signal that lands on another thread (Linux delivers a process's
+    SIGINT to any thread), so a Ctrl-C would wait for the call to end."""
     while True:
         try:
             return future.result(timeout=0.2)

@@ -2,7 +2,9 @@
 functions (so spawned workers can import them): every task finishes exactly
 once; a worker that dies fails only its own task; a task whose ``load`` fails
 never starts; an interrupt met by the caller between two results stops the
-workers at once; the read-ahead thread hands back every item in order.
+workers at once, and so does one that lands on another thread while the caller
+waits for a worker or the read-ahead; the read-ahead thread hands back every item
+in order.
 """
 
 from __future__ import annotations
@@ -101,3 +103,56 @@ def test_read_ahead_gives_every_item_in_order_reading_the_next_meanwhile():
     # the first item, and the one not ready ahead of time, are read here
     assert readers.count(threading.current_thread().name) == 2
     assert list(read_ahead([], load)) == []
+
+
+def _interrupt_from_another_thread(after: float) -> threading.Timer:
+    """SIGINT raised on a thread that is not the main one, as Linux may deliver a
+    Ctrl-C: the main thread sees it only when it next runs Python code."""
+    import signal
+
+    timer = threading.Timer(after, signal.raise_signal, (signal.SIGINT,))
+    timer.start()
+    return timer
+
+
+def test_an_interrupt_while_waiting_for_the_read_ahead_is_seen_before_it_ends():
+    release, events = threading.Event(), []
+
+    def load(n: int) -> int:
+        if n == 1:  # the item read ahead: a read that takes long
+            release.wait(20)
+            events.append("read")
+        return n
+
+    timer = _interrupt_from_another_thread(0.3)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            for _item, _loaded in read_ahead([0, 1, 2], load):
+                pass
+        events.append("interrupted")
+    finally:
+        timer.cancel()
+        release.set()
+    # the interrupt came while the read still ran, not once it ended
+    assert events[0] == "interrupted"
+
+
+def test_an_interrupt_while_waiting_for_a_worker_is_seen_before_its_task_ends(tmp_path):
+    from pathlib import Path
+
+    ended = tmp_path / "ended"
+    tasks = [Task(_sleep_then_touch, (20.0, str(ended)), key="long")]
+    runs = run_in_processes(tasks, 1)
+    # the worker's start (a spawned interpreter) comes before the wait
+    timer = _interrupt_from_another_thread(3.0)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            next(runs)
+    finally:
+        timer.cancel()
+    assert not Path(ended).exists()  # the task was stopped, not waited for
+
+
+def _sleep_then_touch(seconds: float, path: str) -> None:
+    time.sleep(seconds)
+    open(path, "w").close()

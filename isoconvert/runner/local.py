@@ -8,9 +8,10 @@ files with :func:`run_in_processes`.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from typing import Any, TypeVar
 
 from ..errors import IsoconvertError
@@ -20,6 +21,7 @@ from ..signals import (
     stop_workers_on_interrupt,
     worker_init,
 )
+from ..threads import wait_for
 from .tasks import Finished, Task
 
 T = TypeVar("T")
@@ -52,15 +54,31 @@ def read_ahead(
     """
     if not items:
         return
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="isoconvert-read") as reader:
-        ahead = None
-        for i, item in enumerate(items):
-            loaded = ahead.result() if ahead is not None else load(item)
-            following = items[i + 1] if i + 1 < len(items) else None
-            go = following is not None and (ready is None or ready(following))
-            ahead = reader.submit(load, following) if go else None
-            yield item, loaded
-            del loaded
+    ahead = None
+    for i, item in enumerate(items):
+        loaded = wait_for(ahead) if ahead is not None else load(item)
+        following = items[i + 1] if i + 1 < len(items) else None
+        go = following is not None and (ready is None or ready(following))
+        ahead = _load_in_thread(load, following) if go else None
+        yield item, loaded
+        del loaded
+
+
+def _load_in_thread(load: Callable[[T], L], item: T) -> Future:
+    """``load(item)`` in a daemon thread of its own: a Ctrl-C while it reads ends
+    the run at once (a pool's thread would be waited for, at the pool's exit and
+    again at the interpreter's)."""
+    future: Future = Future()
+
+    def run() -> None:
+        future.set_running_or_notify_cancel()
+        try:
+            future.set_result(load(item))
+        except BaseException as exc:  # handed to the caller, who re-raises it
+            future.set_exception(exc)
+
+    threading.Thread(target=run, name="isoconvert-read", daemon=True).start()
+    return future
 
 
 def run_in_processes(
@@ -134,7 +152,8 @@ def run_in_processes(
                         used += task.nbytes
                     if not running:
                         continue
-                    finished, _ = wait(running, return_when=FIRST_COMPLETED)
+                    # in short steps, as wait_for: a Ctrl-C is not held until a task ends
+                    finished, _ = wait(running, timeout=0.2, return_when=FIRST_COMPLETED)
                     for future in finished:
                         task, start, _ = running[future]  # stays there if the pool broke
                         try:
@@ -176,7 +195,7 @@ def _run_alone(
     try:
         with _pool(1, context, initializer) as pool, stop_workers_on_interrupt(pool):
             future = pool.submit(run_in_worker, task.function, *args)
-            result = Finished(task, value=future.result())
+            result = Finished(task, value=wait_for(future))
     except BrokenProcessPool:
         result = Finished(task, died=True)
     result.seconds = time.perf_counter() - start
