@@ -99,6 +99,12 @@ def check_output(
     return path
 
 
+def input_file(input: str | Path) -> list[Path]:
+    """The input as a list of the files to protect: itself when it is a file (a
+    folder or a glob is resolved by its reader, which names its files)."""
+    return [Path(input)] if Path(input).is_file() else []
+
+
 def refuse_inputs(path: str | Path, inputs: Iterable[str | Path]) -> None:
     """Raise OutputError when writing ``path`` would replace a file being read.
 

@@ -16,7 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import check_output, output_stream, refuse_inputs, refuse_shared, refuse_stream
+from .atomic import (
+    check_output,
+    input_file,
+    output_stream,
+    refuse_inputs,
+    refuse_shared,
+    refuse_stream,
+)
 from .errors import FormatError, IsoconvertError, OutputError
 from .extract.slabs import Blocks
 from .mesh import Mesh, MeshSummary
@@ -317,7 +324,7 @@ def convert_levels(
         )
     outputs = level_outputs(output, levels)
     for path in outputs:  # first: a folder given as -o is "a folder", not a format
-        check_output(path, opts.force)
+        check_output(path, opts.force, inputs=input_file(input))  # the input: not "exists"
     writer = output_format(output, opts.format)
     check_attributes(writer, output, normals=opts.normals, values=opts.values is not None)
     by_suffix = WRITERS.by_suffix(Path(output).suffix)
@@ -325,7 +332,7 @@ def convert_levels(
         on_status(f"note: writing {writer.name} into {output}, whose extension says {by_suffix[0]}")
     refuse_shared([*outputs, *also_writes])
     for path in [*outputs, *also_writes]:  # the input file itself, before its header is read
-        refuse_inputs(path, [input] if Path(input).is_file() else [])
+        refuse_inputs(path, input_file(input))
     from .attributes import check_3d
     from .extract.dispatch import default_method
 
@@ -369,7 +376,7 @@ def _convert_levels_to_layer(
                 sharded=opts.sharded, legacy=opts.legacy_mesh)  # fmt: skip
     refuse_shared([output, *also_writes])
     for path in also_writes:
-        refuse_inputs(path, [input] if Path(input).is_file() else [])
+        refuse_inputs(path, input_file(input))
     from .extract.dispatch import default_method
 
     progress("reading")

@@ -10,7 +10,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import check_output, output_stream, refuse_inputs, refuse_shared, refuse_stream
+from .atomic import (
+    check_output,
+    input_file,
+    output_stream,
+    refuse_inputs,
+    refuse_shared,
+    refuse_stream,
+)
 from .convert import (
     ConvertOptions,
     ConvertResult,
@@ -99,7 +106,7 @@ def convert_labels(
         check_layer(output, opts.force, opts.layer_lods, [input], opts.fragment_size,
                     sharded=opts.sharded, legacy=opts.legacy_mesh)  # fmt: skip
     elif opts.single_file:
-        check_output(output, opts.force)
+        check_output(output, opts.force, inputs=input_file(input))
         check_attributes(writer, output, labels=True)
         if post.steps:
             raise IsoconvertError(
@@ -108,11 +115,11 @@ def convert_labels(
             )
     elif opts.labels:
         for n, path in enumerate(label_outputs(output, opts.labels)):
-            check_output(path, opts.force, probe=n == 0)
+            check_output(path, opts.force, inputs=input_file(input), probe=n == 0)
     known = [output] if opts.single_file or writer.layer else label_outputs(output, opts.labels)
     refuse_shared([*known, *also_writes])
     for path in [*known, *also_writes]:  # the input itself, before its header is read
-        refuse_inputs(path, [input] if Path(input).is_file() else [])
+        refuse_inputs(path, input_file(input))
     progress("reading")
     volume = read_input(input, opts)
     refuse_outputs_read([*known, *also_writes], volume)

@@ -265,11 +265,21 @@ def test_existing_output_is_kept_without_force(tmp_path, capsys):
     assert out.read_bytes().startswith(b"ply")
 
 
-def test_output_equal_to_input(tmp_path, capsys):
-    raw = write_raw(tmp_path, ball(6, 2).astype(np.float32))
-    code, _, err = run(capsys, "convert", raw, "-l", 0, "-o", raw, "--format", "ply", "--force")
+@pytest.mark.parametrize("force", [["--force"], []])
+@pytest.mark.parametrize("what", ["mesh", "labels", "report"])
+def test_output_equal_to_input(tmp_path, capsys, force, what):
+    """Said the same with or without --force: "already exists; pass --force" would
+    send the user to a flag that is then refused."""
+    raw = write_raw(tmp_path, ball(6, 2).astype(np.uint8))
+    args = {
+        "mesh": ["-l", 0, "-o", raw, "--format", "ply"],
+        "labels": ["--labels", "--single-file", "-o", raw, "--format", "ply"],
+        "report": ["-l", 0, "-o", tmp_path / "o.ply", f"--report={raw}"],
+    }[what]
+    code, _, err = run(capsys, "convert", raw, *args, *force)
     assert_one_line_error(code, err, "is the input")
-    assert raw.stat().st_size == 6**3 * 4
+    assert raw.stat().st_size == 6**3
+    assert not (tmp_path / "o.ply").exists()
 
 
 def test_subprocess_no_traceback_and_debug_shows_one(tmp_path):

@@ -346,7 +346,7 @@ def test_a_failed_write_leaves_nothing_and_an_existing_layer_needs_force(tmp_pat
     "kwargs, message",
     [
         ({"bits": 12}, "10 or 16"),
-        ({"lods": 0}, "1 or more"),
+        ({"lods": 0}, "1 level of detail or more"),
         ({"data_type": "float32"}, "cannot be a segmentation"),
     ],
 )
@@ -392,14 +392,17 @@ def test_convert_labels_writes_a_layer_cloud_volume_reads(tmp_path, capsys):
     assert "exists" in capsys.readouterr().err
     args = ["convert", str(path), "-o", str(tmp_path / "x"), "--format", "precomputed"]
     for extra, message in [
-        (["--labels", "--lods", "0"], "1 or more"),
+        (["--labels", "--lods", "0"], "--lods: a precomputed layer has 1 level of detail or more"),
         (["--labels", "--single-file"], "leave out --single-file"),
-        (["--labels", "--fragment-size", "0"], "1 voxel a side or more"),
+        (["--labels", "--fragment-size", "0"], "--fragment-size: precomputed fragments are 1"),
     ]:
         assert main(args + extra) == 1
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "x").exists()
+    # a missing parent folder is said as for mesh files
+    assert main([*args[:3], str(tmp_path / "no" / "x"), *args[4:], "--labels"]) == 1
+    assert "the folder" in (err := capsys.readouterr().err) and "does not exist" in err
     # a layer folder holding the input is never replaced
     inside = layer / "atlas.nrrd"
     inside.write_bytes(path.read_bytes())

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from ..atomic import check_output
+from ..atomic import check_output, input_file
 from ..errors import IsoconvertError
 from .display import _quiet_third_party, _stage_display
 from .options import (
@@ -104,7 +104,7 @@ def convert(
     if report not in (None, "-") and not by_label:
         reports = level_outputs(report, level)
         for path in reports:
-            check_output(path, force, "report.json")  # a bad report name must not cost a mesh
+            check_output(path, force, "report.json", inputs=input_file(input))  # before a mesh
     elif report not in (None, "-") and not options.single_file and len(options.labels or ()) != 1:
         from ..atomic import refuse_stream
 
@@ -113,7 +113,7 @@ def convert(
         from ..preview import check_picture_output, require_renderer
 
         require_renderer()
-        check_picture_output(preview, force)
+        check_picture_output(preview, force, inputs=input_file(input))
     # reports and pictures must not replace an input's file either
     also_writes = [*(reports or ()), *([preview] if preview is not None else ())]
     if by_label and report not in (None, "-"):

@@ -12,7 +12,7 @@ from typing import Annotated
 
 import typer
 
-from ..atomic import check_output
+from ..atomic import check_output, input_file
 from ..errors import IsoconvertError, VolumeError
 from ..methods import EXTRACTORS
 from ..readers import READERS
@@ -156,7 +156,7 @@ def info(
         # --plot fails at once
         require_matplotlib()
         plot_format(plot)
-        check_output(plot, force, "info.png", inputs=[input] if Path(input).is_file() else [])
+        check_output(plot, force, "info.png", inputs=input_file(input))
     elif plot_level is not None:
         raise VolumeError("--level is for --plot (the contour drawn on the slices); add --plot")
     from ..stats import histogram, no_levels_reason, suggested_levels, text_histogram

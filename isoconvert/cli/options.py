@@ -474,9 +474,9 @@ class LayerArgs:
     lods: Annotated[
         int | None,
         typer.Option(
-            help="Levels of detail of --format precomputed: 1 is the mesh as extracted, "
-            "level k decimated to within 2^(k-1) voxels (needs isoconvert\\[simplify]); "
-            "default 3 (1 with --legacy-mesh).",
+            help="Levels of detail --format precomputed stores, the mesh as extracted (level "
+            "0) included: 3 is levels 0, 1 and 2, level k decimated to within 2^(k-1) voxels "
+            "(needs isoconvert\\[simplify]); default 3 (1 with --legacy-mesh).",
         ),
     ] = None
     fragment_size: Annotated[

@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import json
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -210,8 +211,11 @@ def render_preview(
     return Preview(np.asarray(image), views, marks, frame, footer)
 
 
-def check_picture_output(output: str | Path, force: bool = False) -> Path:
-    """Fail before any work when ``output`` is not a ``.png`` name that can be written.
+def check_picture_output(
+    output: str | Path, force: bool = False, inputs: Sequence[str | Path] = ()
+) -> Path:
+    """Fail before any work when ``output`` is not a ``.png`` name that can be written
+    (or is one of ``inputs``).
 
     Raises
     ------
@@ -225,7 +229,7 @@ def check_picture_output(output: str | Path, force: bool = False) -> Path:
         return check_output(output, force, example="preview.png")  # says it is a folder
     if output.suffix.lower() != ".png":
         raise OutputError(f"{output}: previews are PNG pictures; name the file .png")
-    return check_output(output, force, example="preview.png")
+    return check_output(output, force, example="preview.png", inputs=inputs)
 
 
 def write_preview(preview: Preview, output: str | Path, force: bool = False) -> Path:
@@ -286,11 +290,9 @@ def preview_file(
         The file cannot be read, holds no triangles, or the output cannot be
         written; no output file is left behind.
     """
-    from ..atomic import refuse_inputs
     from ..meshfile import read_mesh
 
-    check_picture_output(output, force)  # before the work
-    refuse_inputs(output, [path])
+    check_picture_output(output, force, [path] if str(path) != "-" else [])  # before the work
     _renderer_check()
     mesh = read_mesh(path, format=format)
     if str(path) != "-":  # standard input cannot be read twice

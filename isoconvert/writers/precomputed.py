@@ -138,8 +138,10 @@ def check_layer(
             ) from None
     folder = Path(folder)
     parent = folder.parent if str(folder.parent) else Path(".")
+    if not parent.exists():  # worded as for mesh files (atomic.check_output)
+        raise OutputError(f"{folder}: the folder {parent} does not exist; create it first")
     if not parent.is_dir():
-        raise OutputError(f"{parent} is not a folder; create it first")
+        raise OutputError(f"{folder}: {parent} is not a folder; give the layer another name")
     if folder.exists() and not folder.is_dir():
         raise OutputError(f"{folder} exists and is not a layer folder; give a folder name")
     if folder.exists() and not force:
@@ -182,12 +184,17 @@ def _check_legacy(legacy: bool, lods: int, chunk: float | None, sharded: bool) -
 
 def _check_chunk(chunk) -> None:
     if chunk is not None and not (np.isfinite(chunk) and chunk >= 1):
-        raise IsoconvertError(f"precomputed: fragments must be 1 voxel a side or more, got {chunk}")
+        raise IsoconvertError(
+            f"--fragment-size: precomputed fragments are 1 voxel a side or more, got {chunk}"
+        )
 
 
 def _check_lods(lods) -> None:
     if isinstance(lods, bool) or not isinstance(lods, int | np.integer) or lods < 1:
-        raise IsoconvertError(f"precomputed: levels of detail must be 1 or more, got {lods!r}")
+        raise IsoconvertError(
+            f"--lods: a precomputed layer has 1 level of detail or more (level 0, the mesh "
+            f"as extracted, counts), got {lods!r}"
+        )
 
 
 def layer_transform(
