@@ -10,6 +10,7 @@ import re
 import shutil
 import stat
 import tempfile
+import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import BinaryIO
@@ -347,13 +348,24 @@ def atomic_folder(path: str | Path, force: bool = False) -> Iterator[Path]:
         _replace_folder(tmp, path, force)
     except OSError as exc:
         written = _tree_size(tmp)
-        shutil.rmtree(tmp, ignore_errors=True)
+        _remove_tree(tmp)
         if exc.errno in DISK_FULL_ERRNOS:
             raise disk_full_error(path, written, more=True) from None
         raise OutputError(f"{path}: writing failed ({exc.strerror or exc})") from None
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        _remove_tree(tmp)
         raise
+
+
+def _remove_tree(folder: Path, tries: int = 5) -> None:
+    """Remove a part folder, again if a file appeared in it meanwhile: a cluster's
+    task still running when the run failed may write its object there until the
+    folder is gone (then its write fails)."""
+    for _ in range(tries):
+        shutil.rmtree(folder, ignore_errors=True)
+        if not os.path.lexists(folder):
+            return
+        time.sleep(0.05)
 
 
 def _replace_folder(tmp: Path, path: Path, force: bool) -> None:
@@ -466,6 +478,9 @@ class DiskFullError(OutputError):
         self.path = path
         self.needs = needs
         self.why = why  # what was being written (the message's clause)
+
+    def __reduce__(self):  # whole across processes: a cluster's task can meet it
+        return type(self), (str(self), self.path, self.needs, self.why)
 
 
 def disk_full_error(

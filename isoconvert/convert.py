@@ -438,8 +438,8 @@ def refuse_layer_options(opts: ConvertOptions, writer: Writer | None) -> None:
 def layer_objects_on(opts: ConvertOptions, source: str):
     """Where a layer's objects are encoded (``write_precomputed``'s ``map_objects``):
     with ``--scheduler``, each object is one task of the cluster (its coarser levels
-    decimated and everything Draco-encoded by a worker, the bytes sent back and
-    written here, in order); otherwise None, here."""
+    decimated, everything Draco-encoded and the fragments written by a worker, the
+    manifest sent back and written here, in order); otherwise None, here."""
     address = opts.blocks.scheduler
     if address is None:
         return None
@@ -456,7 +456,7 @@ def layer_objects_on(opts: ConvertOptions, source: str):
                 (function, *args),
                 key=f"isoconvert-object-{token}-{n}",
                 what=f"{source}: object {n}",
-                nbytes=int(np.asarray(args[0]).nbytes + np.asarray(args[1]).nbytes),
+                nbytes=sum(a.nbytes for a in args if isinstance(a, np.ndarray)),
             )
             for n, args in enumerate(arguments, start=1)
         )

@@ -23,7 +23,7 @@ distributed = pytest.importorskip("distributed")
 
 import cloudpickle  # noqa: E402  (comes with distributed)
 import dask  # noqa: E402
-from conftest import dataset, read_real_scan, real_scan_names  # noqa: E402
+from conftest import dataset, read_real_scan, real_scan_names, small_tmpfs  # noqa: E402
 
 import isoconvert.distributed as dd  # noqa: E402
 from isoconvert import (  # noqa: E402
@@ -32,7 +32,7 @@ from isoconvert import (  # noqa: E402
     read_volume,
 )
 from isoconvert.convert import ConvertOptions, convert  # noqa: E402
-from isoconvert.errors import IsoconvertError, VolumeError  # noqa: E402
+from isoconvert.errors import IsoconvertError, OutputError, VolumeError  # noqa: E402
 from isoconvert.extract.blocks import Blocks, slab_ranges  # noqa: E402
 from isoconvert.grid import LazyGrid  # noqa: E402
 from isoconvert.volume import Volume  # noqa: E402
@@ -578,22 +578,50 @@ def test_cli_label_layer_on_a_cluster_is_byte_identical(dask_processes, tmp_path
 
 
 def _encode_and_sign(marker: str, function, *args):
-    """A layer's object task that notes the process it ran in."""
+    """A layer's object task that notes the process it ran in, and what it sent
+    back of the object's fragment data: its size (the task wrote it) or the bytes."""
     from isoconvert.convert import _object_task
 
+    result = _object_task(function, *args)
     with open(marker, "a") as f:
-        f.write(f"{os.getpid()}\n")
-    return _object_task(function, *args)
+        f.write(f"{os.getpid()} {type(result[1]).__name__}\n")
+    return result
+
+
+def _encode_elsewhere(function, target, *args):
+    """A layer's object task on a worker that does not see the client's folder."""
+    from isoconvert.convert import _object_task
+
+    return _object_task(function, "/nonexistent-isoconvert-folder/1", *args)
+
+
+def _fail_third(function, target, *args):
+    """The third object fails, once the others may have written their fragments."""
+    from isoconvert.convert import _object_task
+
+    if target.endswith("/3"):
+        time.sleep(0.5)
+        raise IsoconvertError("object 3 refused on the worker")
+    return _object_task(function, target, *args)
 
 
 def _refuse_object(function, *args):
     raise IsoconvertError("object refused on the worker")
 
 
-def test_layer_objects_are_encoded_by_the_workers(address, monkeypatch, tmp_path):
+def _layer_files(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+@pytest.mark.parametrize("sharded", [False, True])
+def test_layer_objects_are_encoded_and_written_by_the_workers(
+    address, monkeypatch, tmp_path, sharded
+):
     """With a scheduler, each object's levels of detail are decimated and encoded
-    by a worker (not here); the layer is the one written here, byte for byte;
-    an error inside such a task is the run's one-line error, and no layer is left."""
+    by a worker (not here), which writes the fragments into the layer's part folder
+    itself and sends back only the manifest; the layer is the one written here,
+    byte for byte; an error inside such a task is the run's one-line error, and no
+    layer is left."""
     pytest.importorskip("DracoPy")
     pytest.importorskip("meshoptimizer")
     from isoconvert.label_convert import convert_labels
@@ -601,7 +629,7 @@ def test_layer_objects_are_encoded_by_the_workers(address, monkeypatch, tmp_path
     convert_module = sys.modules["isoconvert.convert"]  # the package's `convert` is the function
 
     np.save(tmp_path / "atlas.npy", _atlas())
-    options = {"format": "precomputed", "lods": 2, "force": True}
+    options = {"format": "precomputed", "lods": 2, "force": True, "sharded": sharded}
     convert_labels(tmp_path / "atlas.npy", tmp_path / "here", **options)
     marker = tmp_path / "pids"
     monkeypatch.setattr(
@@ -609,18 +637,65 @@ def test_layer_objects_are_encoded_by_the_workers(address, monkeypatch, tmp_path
     )
     blocks = Blocks(scheduler=address)
     convert_labels(tmp_path / "atlas.npy", tmp_path / "there", blocks=blocks, **options)
-    pids = {int(line) for line in marker.read_text().split()}
-    assert len(marker.read_text().split()) == 6  # one task per label
-    assert pids and os.getpid() not in pids
-    for path in (tmp_path / "here").rglob("*"):
-        if path.is_file():
-            twin = tmp_path / "there" / path.relative_to(tmp_path / "here")
-            assert twin.read_bytes() == path.read_bytes()
+    signs = [line.split() for line in marker.read_text().splitlines()]
+    assert len(signs) == 6  # one task per label ...
+    assert {int(pid) for pid, _ in signs} and os.getpid() not in {int(p) for p, _ in signs}
+    assert {sent for _, sent in signs} == {"int"}  # ... which wrote its fragments itself
+    assert _layer_files(tmp_path / "there") == _layer_files(tmp_path / "here")
+    # a worker that does not see the folder sends the fragments back: the same layer
+    monkeypatch.setattr(convert_module, "_object_task", _encode_elsewhere)
+    convert_labels(tmp_path / "atlas.npy", tmp_path / "sent", blocks=blocks, **options)
+    assert _layer_files(tmp_path / "sent") == _layer_files(tmp_path / "here")
+    # one object failing while the others write theirs: nothing is left
+    monkeypatch.setattr(convert_module, "_object_task", _fail_third)
+    with pytest.raises(IsoconvertError, match="^object 3 refused on the worker$"):
+        convert_labels(tmp_path / "atlas.npy", tmp_path / "failed", blocks=blocks, **options)
+    time.sleep(1.0)  # the other objects' tasks have ended: they wrote nothing afterwards
+    assert not (tmp_path / "failed").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".failed")]
     monkeypatch.setattr(convert_module, "_object_task", _refuse_object)
     with pytest.raises(IsoconvertError, match="^object refused on the worker$"):
         convert_labels(tmp_path / "atlas.npy", tmp_path / "failed", blocks=blocks, **options)
     assert not (tmp_path / "failed").exists()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".failed")]
+
+
+def test_a_full_disk_while_the_workers_write_fragments_is_one_line(address, tmp_path):
+    """A layer of 1.9 MB of fragments onto a 1 MiB tmpfs, its objects written by the
+    workers: the one-line disk-full error naming the layer, and the tmpfs empty."""
+    pytest.importorskip("DracoPy")
+    import trimesh
+
+    from isoconvert.convert import layer_objects_on
+    from isoconvert.mesh import Mesh
+    from isoconvert.writers.precomputed import write_object, write_precomputed
+
+    rng = np.random.default_rng(3)
+    meshes = {}
+    for segment in range(1, 41):  # bumpy spheres: Draco cannot shrink their positions much
+        sphere = trimesh.creation.icosphere(subdivisions=5, radius=20.0)
+        bumps = sphere.vertices + rng.normal(0, 0.3, sphere.vertices.shape) + 30 * segment
+        meshes[segment] = Mesh(bumps, sphere.faces.astype(np.int64))
+    grid = {"shape": (1300, 1300, 1300), "origin": (0.0, 0.0, 0.0), "affine": np.eye(3)}
+    on_cluster = layer_objects_on(ConvertOptions(blocks=Blocks(scheduler=address)), "bumps")
+    write_precomputed(tmp_path / "roomy", meshes, grid, map_objects=on_cluster)
+    assert sum(p.stat().st_size for p in (tmp_path / "roomy").rglob("*")) > 1.5 * 2**20
+    with small_tmpfs(tmp_path / "full", "1m") as disk:
+        with pytest.raises(OutputError, match="disk full at") as caught:
+            write_precomputed(disk / "layer", meshes, grid, map_objects=on_cluster)
+        message = str(caught.value)
+        # the workers' fragments fill it, and one of them or the client's next
+        # manifest is the write that fails
+        assert "\n" not in message and str(disk / "layer") in message
+        assert list(disk.iterdir()) == []
+        # a worker's own write that finds no room says so
+        (disk / "part").mkdir()
+        mesh = meshes[1]
+        args = (mesh.vertices, mesh.cells, np.zeros(3), np.eye(3), 1, 16, None, None)
+        (disk / "filler").write_bytes(b"x" * (2**20 - 8192))
+        with pytest.raises(OutputError, match="while a worker wrote an object") as caught:
+            write_object(str(disk / "part" / "1"), "the-layer", *args)
+        assert str(caught.value).startswith("disk full at the-layer")
 
 
 # --- workers that die (last: the LocalCluster's nannies restart them) ------------------------

@@ -51,13 +51,19 @@ origin and direction are not stored (a note says so where they are not trivial).
 
 Each object is encoded by :func:`encode_object`, a function of arrays and scalars,
 which the caller may run elsewhere (``map_objects``: the jobs send each object to a
-Dask cluster's workers with ``--scheduler``); the bytes are written here.
+Dask cluster's workers with ``--scheduler``, as :func:`write_object`). There each
+task writes its object's fragment data into the layer's part folder itself (the
+folder is on a file system the workers share) and sends back only the manifest;
+the client writes the manifests (or, sharded, the shards from the tasks' files)
+and renames the folder into place. A worker that does not see the folder sends
+the data back instead.
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import shutil
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 
@@ -79,7 +85,7 @@ QUANTIZATION_BITS = (10, 16)
 _DATA_TYPES = ("uint8", "uint16", "uint32", "uint64")
 
 #: ``map_objects(function, arguments)``: ``function(*args)`` for each tuple, in order.
-ObjectMap = Callable[[Callable[..., tuple[bytes, bytes]], Iterable[tuple]], Iterable]
+ObjectMap = Callable[[Callable[..., tuple[bytes, bytes | int]], Iterable[tuple]], Iterable]
 
 
 def not_a_file(mesh: Mesh, fh, ascii: bool) -> None:
@@ -293,10 +299,11 @@ def write_precomputed(
     on_status : callable or None
         Receives notes.
     map_objects : callable or None
-        ``map_objects(encode_object, arguments)``: ``encode_object(*args)`` for each
+        ``map_objects(write_object, arguments)``: ``write_object(*args)`` for each
         tuple of ``arguments`` (an iterable), the results in their order; where the
-        objects are encoded (a Dask cluster's workers, say). None: here, objects side
-        by side on threads when there are coarser levels to decimate.
+        objects are encoded and their fragments written (a Dask cluster's workers,
+        say). None: here, objects side by side on threads when there are coarser
+        levels to decimate.
     object_threads : int or None
         Objects encoded here at once; None: as many as the kernels' threads when
         there are coarser levels to decimate (each holds its object's collapses),
@@ -392,7 +399,7 @@ def write_precomputed(
         with contextlib.ExitStack() as stack:
             spill = None
             if spec is not None:
-                spill = stack.enter_context(_ObjectSpill(work / "mesh" / ".objects"))
+                spill = stack.enter_context(_ObjectSpill(work / "mesh"))
             if map_objects is None:
                 # objects side by side: the coarser levels' collapses are most of the
                 # work, and their kernels leave the interpreter free
@@ -400,13 +407,23 @@ def write_precomputed(
                 done = threaded_in_order(encode_object, arguments(), threads)
                 stack.callback(done.close)
             else:
-                done = map_objects(encode_object, arguments())
+                # elsewhere (a cluster's workers): each task writes its object's
+                # fragments into the part folder itself when it sees it, and only
+                # the manifest comes back (see write_object)
+                def placed():
+                    for segment, args in zip(meshes, arguments(), strict=True):
+                        where = work / "mesh" if spill is None else spill.fragments
+                        yield (str(where / str(int(segment))), str(folder), *args)
+
+                done = map_objects(write_object, placed())
                 if hasattr(done, "close"):  # stops the work left when this fails
                     stack.callback(done.close)
             for segment, (manifest, data) in zip(meshes, done, strict=True):
+                written = isinstance(data, int)  # its size: the task wrote the data
                 if spec is None:
                     (work / "mesh" / f"{int(segment)}.index").write_bytes(manifest)
-                    (work / "mesh" / f"{int(segment)}").write_bytes(data)
+                    if not written:
+                        (work / "mesh" / f"{int(segment)}").write_bytes(data)
                 else:
                     spill.add(int(segment), data, manifest)
             if spill is not None:
@@ -417,31 +434,45 @@ def write_precomputed(
 class _ObjectSpill:
     """Objects' fragment data and manifests in one file, read back one at a time.
 
+    The fragment data of an object a cluster's task wrote itself is in its own
+    file of :attr:`fragments` instead, removed once read.
+
     Parameters
     ----------
-    path : Path
-        The file (in the layer's part folder, so a failed run leaves nothing).
+    folder : Path
+        The layer's part folder's mesh folder (so a failed run leaves nothing).
     """
 
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self._file = open(path, "w+b")  # noqa: SIM115 (closed by __exit__)
+    def __init__(self, folder: Path) -> None:
+        self.path = folder / ".objects"
+        self.fragments = folder / ".fragments"
+        self.fragments.mkdir()
+        self._file = open(self.path, "w+b")  # noqa: SIM115 (closed by __exit__)
         self._at = 0
-        #: segment -> (offset, fragment data bytes, manifest bytes)
-        self.sizes: dict[int, tuple[int, int, int]] = {}
+        #: segment -> (offset, fragment data bytes, manifest bytes, data in fragments)
+        self.sizes: dict[int, tuple[int, int, int, bool]] = {}
 
-    def add(self, segment: int, data: bytes, manifest: bytes) -> None:
+    def add(self, segment: int, data: bytes | int, manifest: bytes) -> None:
+        """The object's bytes, or (an int) the size of those written to its file."""
         self._file.seek(self._at)
-        self._file.write(data)
+        written = isinstance(data, int)
+        if not written:
+            self._file.write(data)
         self._file.write(manifest)
-        self.sizes[segment] = (self._at, len(data), len(manifest))
-        self._at += len(data) + len(manifest)
+        size = data if written else len(data)
+        self.sizes[segment] = (self._at, size, len(manifest), written)
+        self._at += (0 if written else size) + len(manifest)
 
     def read(self, segment: int) -> bytes:
         """The object's fragment data followed by its manifest."""
-        at, data, manifest = self.sizes[segment]
+        at, data, manifest, written = self.sizes[segment]
         self._file.seek(at)
-        return self._file.read(data + manifest)
+        if not written:
+            return self._file.read(data + manifest)
+        path = self.fragments / str(segment)
+        fragments = path.read_bytes()
+        path.unlink()
+        return fragments + self._file.read(manifest)
 
     def __enter__(self) -> _ObjectSpill:
         return self
@@ -449,6 +480,7 @@ class _ObjectSpill:
     def __exit__(self, *exc) -> None:
         self._file.close()
         self.path.unlink(missing_ok=True)
+        shutil.rmtree(self.fragments, ignore_errors=True)
 
 
 def encode_object(
@@ -480,6 +512,43 @@ def encode_object(
     full = Mesh(index, np.asarray(cells, dtype=np.int64))
     levels = [full] + [decimate(full, float(2 ** (k - 1))) for k in range(1, lods)]
     return _object(levels, bits, _dracopy(), chunk)
+
+
+def write_object(target: str, layer: str, *args) -> tuple[bytes, bytes | int]:
+    """:func:`encode_object` as a cluster's task: the fragment data is written by the
+    task itself to ``target`` (in the layer's part folder) when it sees that folder
+    (a file system shared with the client, as a cluster's output usually is), and
+    only the manifest and the data's size come back; a task that does not see it
+    sends the data back instead, for the client to write.
+
+    Parameters
+    ----------
+    target : str
+        The file of the object's fragment data.
+    layer : str
+        The layer's folder, named in errors.
+    *args
+        :func:`encode_object`'s.
+
+    Returns
+    -------
+    manifest : bytes
+    data : bytes or int
+        The fragment data, or its size once written to ``target``.
+    """
+    from ..atomic import DISK_FULL_ERRNOS, disk_full_error
+
+    manifest, data = encode_object(*args)
+    path = Path(target)
+    if not path.parent.is_dir():  # the client's part folder is not on this machine
+        return manifest, data
+    try:
+        path.write_bytes(data)
+    except OSError as exc:  # the client removes the part folder on this error
+        if exc.errno in DISK_FULL_ERRNOS:
+            raise disk_full_error(layer, len(data), why="while a worker wrote an object") from None
+        raise OutputError(f"{layer}: a worker could not write an object ({exc.strerror})") from None
+    return manifest, len(data)
 
 
 def _axis_aligned_at_zero(grid: dict) -> bool:
@@ -551,7 +620,7 @@ def _write_shards(folder: Path, objects: _ObjectSpill, spec: dict) -> None:
             ids = by_minishard.get(minishard, [])
             starts, sizes = [], []
             for segment in ids:
-                _, data, manifest = objects.sizes[segment]
+                _, data, manifest, _ = objects.sizes[segment]
                 order.append(segment)
                 starts.append(at + data)
                 sizes.append(manifest)
