@@ -5,6 +5,11 @@ in one line. The library never prints or exits; the CLI turns these into one
 line on stderr and a non-zero exit code.
 """
 
+from __future__ import annotations
+
+import functools
+import re
+
 
 class IsoconvertError(Exception):
     """Base class of every error caused by input the user can fix."""
@@ -42,10 +47,37 @@ EXTRAS = {"h5py": "hdf5", "netCDF4": "netcdf"}
 
 
 def install_hint(package: str) -> str:
-    """How to install an optional package: ``pip install "isoconvert[hdf5]"`` for
-    h5py, and so on; ``pip install PACKAGE`` for one without an extra."""
+    """How to install an optional package: :func:`extra_hint` of its extra (h5py:
+    hdf5, and so on); ``pip install PACKAGE`` for one without an extra."""
     extra = EXTRAS.get(package)
-    return f'pip install "isoconvert[{extra}]"' if extra else f"pip install {package}"
+    return extra_hint(extra) if extra else f"pip install {package}"
+
+
+@functools.cache
+def extra_hint(extra: str) -> str:
+    """How to install one of isoconvert's extras, as this installation can:
+    ``pip install "isoconvert[dicom]"``, or, where isoconvert was installed from a
+    folder (a clone), the extra's own requirements (``pip install "pydicom>=2.4"``):
+    the package index may not hold isoconvert then, and installing the folder again
+    would rebuild its kernels."""
+    import importlib.metadata
+    import json
+
+    try:
+        dist = importlib.metadata.distribution("isoconvert")
+        origin = json.loads(dist.read_text("direct_url.json") or "{}")
+        requires = dist.requires or []
+    except Exception:  # not installed (run from the source tree), or odd metadata
+        origin, requires = {}, []
+    if str(origin.get("url", "")).startswith("file:"):
+        needs = [
+            req.split(";")[0].strip()
+            for req in requires
+            if re.search(r"""extra\s*==\s*["']""" + re.escape(extra) + """["']""", req)
+        ]
+        if needs:
+            return "pip install " + " ".join(f'"{need}"' for need in needs)
+    return f'pip install "isoconvert[{extra}]"'
 
 
 def utf8_text(text: str) -> bytes:

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .atomic import atomic_output, check_output
-from .errors import IsoconvertError, LevelError, OutputError
+from .errors import IsoconvertError, LevelError, OutputError, extra_hint
 from .stats import Histogram, histogram, no_levels_reason, suggested_levels
 from .volume import Volume, slabs
 
@@ -167,7 +167,7 @@ def require_matplotlib() -> None:
     try:
         import matplotlib  # noqa: F401
     except ImportError:
-        raise IsoconvertError("pictures need matplotlib: pip install 'isoconvert[plot]'") from None
+        raise IsoconvertError(f"pictures need matplotlib: {extra_hint('plot')}") from None
 
 
 def plot_format(path: str | Path) -> str:

@@ -4,6 +4,7 @@ middle slices with their isocontour, checked on the pixels of the PNG."""
 from __future__ import annotations
 
 import json
+import re
 import sys
 
 import numpy as np
@@ -15,7 +16,7 @@ pytest.importorskip("matplotlib")
 
 from isoconvert import Volume, read_volume  # noqa: E402
 from isoconvert.cli import main  # noqa: E402
-from isoconvert.errors import IsoconvertError  # noqa: E402
+from isoconvert.errors import IsoconvertError, extra_hint  # noqa: E402
 from isoconvert.grid import RawGrid  # noqa: E402
 from isoconvert.infoplot import (  # noqa: E402
     CONTOUR_COLOR,
@@ -272,12 +273,12 @@ def test_missing_matplotlib_is_one_line_naming_the_extra(tmp_path, monkeypatch, 
     from conftest import SAMPLES
 
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import fails
-    with pytest.raises(IsoconvertError, match=r"pip install 'isoconvert\[plot\]'"):
+    with pytest.raises(IsoconvertError, match=re.escape(extra_hint("plot"))):
         require_matplotlib()
     out = tmp_path / "a.png"
     assert main(["info", str(SAMPLES / "sphere.nrrd"), "--plot", str(out)]) == 1
     err = capsys.readouterr().err
-    assert "pip install 'isoconvert[plot]'" in err and err.count("\n") == 1
+    assert extra_hint("plot") in err and err.count("\n") == 1
     assert not out.exists()
 
 

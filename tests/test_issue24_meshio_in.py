@@ -17,13 +17,13 @@ from conftest import SAMPLES
 
 from isoconvert import Mesh, check_mesh, extract, read_volume, write_mesh
 from isoconvert.cli import main
-from isoconvert.errors import FormatError
+from isoconvert.errors import FormatError, extra_hint
 from isoconvert.meshfile import MESH_SUFFIXES, READ_SUFFIXES, read_mesh
 
 #: the issue's formats and a few more, as meshio writes them
 FORMATS = [".vtu", ".vtk", ".msh", ".xdmf", ".inp", ".mesh", ".med", ".avs", ".mdpa"]
 
-HINT = 'needs the h5py package; pip install "isoconvert[hdf5]"'
+HINT = f"needs the h5py package; {extra_hint('hdf5')}"
 
 
 def needs(suffix: str) -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import os
+import re
 from contextlib import redirect_stdout
 
 import meshio
@@ -16,7 +17,7 @@ from conftest import SAMPLES
 
 from isoconvert import Blocks, Mesh, extract, read_volume, write_mesh
 from isoconvert.cli import main
-from isoconvert.errors import FormatError
+from isoconvert.errors import FormatError, extra_hint
 from isoconvert.writers import WRITERS
 
 #: writer name -> (suffix, attributes it keeps, has a text form, segments too)
@@ -175,7 +176,7 @@ def test_a_missing_h5py_is_the_install_hint(torus, tmp_path, monkeypatch):
 
     monkeypatch.setitem(sys.modules, "h5py", None)  # import h5py now raises ImportError
     with pytest.raises(
-        FormatError, match=r'needs the h5py package; pip install "isoconvert\[hdf5\]"'
+        FormatError, match=re.escape(f"needs the h5py package; {extra_hint('hdf5')}")
     ):
         write_mesh(plain(torus), tmp_path / "t.xdmf")
     assert os.listdir(tmp_path) == []

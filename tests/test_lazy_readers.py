@@ -19,7 +19,7 @@ from conftest import dataset
 from test_readers_issue8 import compress, header, memory_mapped, one_line
 
 from isoconvert import read_volume
-from isoconvert.errors import FormatError, VolumeError
+from isoconvert.errors import FormatError, VolumeError, extra_hint
 from isoconvert.grid import RawGrid
 from isoconvert.readers import detect_format
 from isoconvert.readers import nrrd as nrrd_reader
@@ -654,7 +654,7 @@ def test_zarr_bad_inputs_one_line_each(tmp_path, zyx, monkeypatch):
     monkeypatch.setitem(sys.modules, "zarr", None)  # as if not installed
     with pytest.raises(FormatError) as err:
         read_volume(tmp_path / "plain3.zarr")
-    one_line(err.value, "reading Zarr needs the zarr package: pip install 'isoconvert[zarr]'")
+    one_line(err.value, f"reading Zarr needs the zarr package: {extra_hint('zarr')}")
 
 
 @needs_zarr

@@ -16,7 +16,7 @@ from PIL import Image  # noqa: E402
 
 from isoconvert import Volume, extract  # noqa: E402
 from isoconvert.cli import main  # noqa: E402
-from isoconvert.errors import IsoconvertError  # noqa: E402
+from isoconvert.errors import IsoconvertError, extra_hint  # noqa: E402
 from isoconvert.mesh import Mesh  # noqa: E402
 from isoconvert.preview import (  # noqa: E402
     PROBLEMS,
@@ -399,7 +399,7 @@ def test_missing_vtk_is_a_one_line_error(monkeypatch, tmp_path, capsys):
     ply = tmp_path / "t.ply"
     write_mesh(mesh, ply)
     code, out, err = _run(["preview", ply, "-o", tmp_path / "t.png"], capsys)
-    assert code == 1 and "pip install 'isoconvert[render]'" in err
+    assert code == 1 and extra_hint("render") in err
     assert len(err.strip().splitlines()) == 1
     assert not (tmp_path / "t.png").exists()
 

@@ -10,7 +10,7 @@ import pytest
 from conftest import dataset, edge_key, vtk_flying_edges
 
 from isoconvert import extract, read_volume
-from isoconvert.errors import FormatError, IsoconvertError, VolumeError
+from isoconvert.errors import FormatError, IsoconvertError, VolumeError, extra_hint
 from isoconvert.extract.blocks import Blocks
 from isoconvert.grid import RawGrid
 from isoconvert.readers import detect_format, format_suffix, unsupported_format
@@ -254,7 +254,7 @@ def test_missing_nibabel_is_one_line(tmp_path, xyz, monkeypatch):
 
     monkeypatch.setattr(builtins, "__import__", no_nibabel)
     msg = one_line_error(path, FormatError)
-    assert msg == "reading NIfTI needs nibabel: pip install 'isoconvert[nifti]'"
+    assert msg == f"reading NIfTI needs nibabel: {extra_hint('nifti')}"
 
 
 def test_folder_of_nifti_files_says_give_the_file(tmp_path, xyz):

@@ -59,8 +59,8 @@ from .picture import (
 )
 from .picture import PNG_KEY as PNG_KEY
 from .picture import recorded_header as recorded_header
-from .render import INSTALL_HINT, RenderError, require_renderer, vertex_normals
 from .render import SURFACE as SURFACE
+from .render import RenderError, require_renderer, vertex_normals
 from .sheet import THUMBNAIL_SIZE as THUMBNAIL_SIZE
 from .sheet import SheetEntry, contact_sheet, write_contact_sheet
 from .sheet import batch_thumbnail as batch_thumbnail
@@ -71,7 +71,6 @@ from .views import View, make_views
 
 __all__ = [
     "DEFAULT_SIZE",
-    "INSTALL_HINT",
     "PROBLEMS",
     "Preview",
     "RenderError",

@@ -6,12 +6,10 @@ import sys
 
 import numpy as np
 
-from ..errors import IsoconvertError, one_line
+from ..errors import IsoconvertError, extra_hint, one_line
 from ..mesh import Mesh
 from .views import Layout, View
 
-#: Install hint when VTK is missing.
-INSTALL_HINT = "pip install 'isoconvert[render]'"
 #: Colour of the surface (RGB in 0..1): light grey, slightly blue.
 SURFACE = (0.80, 0.82, 0.86)
 
@@ -37,7 +35,8 @@ def _vtk():
         from vtkmodules.util import numpy_support
     except ImportError as exc:
         raise RenderError(
-            f"previews need VTK, which is not installed ({one_line(exc, 120)}); {INSTALL_HINT}"
+            f"previews need VTK, which is not installed ({one_line(exc, 120)}); "
+            f"{extra_hint('render')}"
         ) from None
     # VTK logs to stderr (e.g. that there is no X server before it falls back to
     # EGL); the CLI promises one line per error, so errors come through exceptions.

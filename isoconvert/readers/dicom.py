@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError, VolumeError, one_line
+from ..errors import FormatError, VolumeError, extra_hint, one_line
 from ..grid import LazyGrid
 from ..volume import Volume
 from .options import ReadOptions, absolute_files, spacing_note
@@ -44,9 +44,7 @@ def _pydicom():
     try:
         import pydicom
     except ImportError:
-        raise FormatError(
-            "reading DICOM needs pydicom: pip install 'isoconvert[dicom]' (or pip install pydicom)"
-        ) from None
+        raise FormatError(f"reading DICOM needs pydicom: {extra_hint('dicom')}") from None
     return pydicom
 
 

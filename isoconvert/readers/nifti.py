@@ -27,13 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError, VolumeError, one_line
+from ..errors import FormatError, VolumeError, extra_hint, one_line
 from ..grid import RawGrid
 from ..memory import check_fits
 from ..volume import Volume
 from .options import ReadOptions, absolute_files
 
-_NEEDS = "reading NIfTI needs nibabel: pip install 'isoconvert[nifti]'"
 _RAS_NOTE = "coordinates in RAS (NIfTI's frame)"
 _UNITS = {"mm": "mm", "micron": "µm", "meter": "m"}
 _GZIP_MAGIC = b"\x1f\x8b"
@@ -43,7 +42,7 @@ def _nibabel():
     try:
         import nibabel
     except ImportError:
-        raise FormatError(_NEEDS) from None
+        raise FormatError(f"reading NIfTI needs nibabel: {extra_hint('nifti')}") from None
     return nibabel
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError, VolumeError, one_line
+from ..errors import FormatError, VolumeError, extra_hint, one_line
 from ..grid import LazyGrid
 from ..volume import Volume
 from .options import (
@@ -48,7 +48,7 @@ def _zarr(path: Path):
         import zarr
     except ImportError:
         raise FormatError(
-            f"{path}: reading Zarr needs the zarr package: pip install 'isoconvert[zarr]'"
+            f"{path}: reading Zarr needs the zarr package: {extra_hint('zarr')}"
         ) from None
     return zarr
 

@@ -34,7 +34,7 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import CancelledError
 from typing import TYPE_CHECKING, Any
 
-from ..errors import IsoconvertError, one_line
+from ..errors import IsoconvertError, extra_hint, one_line
 from .tasks import MEMORY_HINT, Finished, Task, TaskFailure, worker_threads
 
 if TYPE_CHECKING:
@@ -52,8 +52,6 @@ DEFAULT_TIMEOUT = 10.0
 RETRIES = 1
 #: Tasks in flight per thread of the cluster: one running, one ready to start.
 TASKS_PER_THREAD = 2
-
-_INSTALL = "running on a Dask cluster needs dask and distributed: pip install 'isoconvert[dask]'"
 
 _clients: dict[str, Client] = {}
 _clients_lock = threading.Lock()
@@ -132,7 +130,9 @@ def connect(address: str, timeout: float | None = None) -> Client:
     try:
         from distributed import Client
     except ImportError:
-        raise IsoconvertError(_INSTALL) from None
+        raise IsoconvertError(
+            f"running on a Dask cluster needs dask and distributed: {extra_hint('dask')}"
+        ) from None
     from ..quiet import silence_distributed
 
     silence_distributed()  # its log lines would reach the user's stderr

@@ -70,7 +70,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_folder
-from ..errors import FormatError, IsoconvertError, OutputError
+from ..errors import FormatError, IsoconvertError, OutputError, extra_hint
 from ..geometry import normalized_grid
 from ..mesh import Mesh
 from ..threads import kernel_threads, threaded_in_order
@@ -140,7 +140,7 @@ def check_layer(
             import meshoptimizer  # noqa: F401
         except ImportError:
             raise IsoconvertError(
-                '--lods above 1 decimates: pip install "isoconvert[simplify]", or --lods 1'
+                f"--lods above 1 decimates: {extra_hint('simplify')}, or --lods 1"
             ) from None
     folder = Path(folder)
     parent = folder.parent if str(folder.parent) else Path(".")
@@ -665,7 +665,7 @@ def _dracopy():
         import DracoPy
     except ImportError:
         raise IsoconvertError(
-            'the precomputed format needs DracoPy: pip install "isoconvert[precomputed]"'
+            f"the precomputed format needs DracoPy: {extra_hint('precomputed')}"
         ) from None
     return DracoPy
 
