@@ -29,6 +29,10 @@ the peer), beside the best and median times. The pipelines:
   of detail, within ``--max-memory 256M`` (read in slabs) and whole, against the zmesh +
   cloud-volume script. Peak memory is printed for every command (``wait4``'s maximum
   resident size of the process).
+- ``layer-many``: 15,625 small objects (cubes of 6 voxels in a 200^3 uint32 volume) to a
+  layer of one level of detail, unsharded, ``--sharded`` and ``--legacy-mesh``, against
+  the zmesh + cloud-volume script (which writes the legacy format): the costs per
+  object rather than per voxel.
 - ``normals``: a 384^3 float32 gyroid (raw) to binary PLY with and without ``--normals``.
   Target 1.3x.
 - ``ct-bound``: the chest CT (DICOM series, 512x512x64, level 300.5 HU) decimated with
@@ -325,6 +329,40 @@ def large_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
     ]
 
 
+def many_objects_volume(n: int = 200, block: int = 8) -> np.ndarray:
+    """(X, Y, Z) uint32 labels: a grid of ``(n // block)^3`` cubes of ``block - 2``
+    voxels a side, each its own label, background between them (a connectomics
+    layer's many small objects: 15,625 at the defaults)."""
+    index = np.arange(n) // block
+    side = n // block
+    labels = index[:, None, None] * side * side + index[None, :, None] * side + index[None, None, :]
+    inside = np.arange(n) % block < block - 2
+    cubes = inside[:, None, None] & inside[None, :, None] & inside[None, None, :]
+    return np.where(cubes, labels + 1, 0).astype(np.uint32)
+
+
+def many_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
+    """A layer of 15,625 small objects: the per-object costs (encoding, manifests,
+    shards) rather than the extraction's."""
+    volume = tmp / "many_objects.npy"
+    if not volume.exists():
+        np.save(volume, np.ascontiguousarray(many_objects_volume().T))
+    (tmp / "zmesh_layer.py").write_text(ZMESH_LAYER)
+    base = [exe, "convert", str(volume), "--labels", "--format", "precomputed", "-f", "-q"]
+    one = [*base, "--lods", "1"]
+    commands = [
+        Command("isoconvert 1 level", one + ["-o", str(tmp / "many_l1")]),
+        Command("isoconvert 1 level --sharded", one + ["--sharded", "-o", str(tmp / "many_sh")]),
+        Command("isoconvert --legacy-mesh", base + ["--legacy-mesh", "-o", str(tmp / "many_lg")]),
+        Command(
+            "zmesh + cloud-volume script (legacy)",
+            [sys.executable, str(tmp / "zmesh_layer.py"), str(volume), str(tmp / "many_zl")],
+        ),
+    ]
+    peer = "zmesh + cloud-volume script (legacy)"
+    return commands, [(c.name, peer, None) for c in commands[:3]]
+
+
 #: --max-memory of the large layer: half the 512 MB volume.
 LARGE_BUDGET = "256M"
 
@@ -409,6 +447,7 @@ PIPELINES = {
         "40-label 512^3 uint32 atlas (512 MB): a layer, within --max-memory and whole",
         large_layer_pipeline,
     ),
+    "layer-many": ("15,625 small objects (200^3 uint32): a layer", many_layer_pipeline),
     "normals": ("gyroid 384^3 float32 -> PLY, with and without --normals", normals_pipeline),
     "ct-print": ("chest CT -> printable STL", ct_print_pipeline),
 }

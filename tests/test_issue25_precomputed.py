@@ -642,14 +642,28 @@ def test_a_full_disk_while_objects_wait_for_their_shard_is_one_line(tmp_path, si
         assert list(disk.iterdir()) == []
 
 
-def test_the_layer_does_not_depend_on_the_thread_count(tmp_path, labelled, monkeypatch):
-    """Objects are encoded side by side on threads; the files are the same bytes."""
+def test_a_full_disk_while_threads_write_objects_is_one_line(tmp_path):
+    """Unsharded, each thread writes its object's fragments: a 1 MiB tmpfs fills
+    while they do, the one-line disk-full error naming the layer, the tmpfs empty."""
+    meshes = _balls()
+    grid = next(iter(meshes.values())).info["grid"]
+    with small_tmpfs(tmp_path / "full", "1m") as disk:
+        with pytest.raises(OutputError, match=f"^disk full at {disk / 'layer'}") as caught:
+            write_precomputed(disk / "layer", meshes, grid, object_threads=2)
+        assert "\n" not in str(caught.value)
+        assert list(disk.iterdir()) == []
+
+
+@pytest.mark.parametrize("lods", [1, 3])
+def test_the_layer_does_not_depend_on_the_thread_count(tmp_path, labelled, monkeypatch, lods):
+    """Objects are encoded (and unsharded, written) side by side on threads; the
+    files are the same bytes."""
     _, result = labelled
     grid = next(iter(result.meshes.values())).info["grid"]
     for threads in ("1", "2"):
         monkeypatch.setenv("ISOCONVERT_THREADS", threads)
-        write_precomputed(tmp_path / threads, result.meshes, grid, unit="µm", lods=3,
-                          decimate=_bounded, chunk=8.0)  # fmt: skip
+        write_precomputed(tmp_path / threads, result.meshes, grid, unit="µm", lods=lods,
+                          decimate=_bounded, chunk=8.0, object_threads=int(threads))  # fmt: skip
     one = sorted(p.relative_to(tmp_path / "1") for p in (tmp_path / "1").rglob("*"))
     two = sorted(p.relative_to(tmp_path / "2") for p in (tmp_path / "2").rglob("*"))
     assert one == two

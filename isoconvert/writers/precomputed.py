@@ -400,22 +400,31 @@ def write_precomputed(
             spill = None
             if spec is not None:
                 spill = stack.enter_context(_ObjectSpill(work / "mesh"))
+
+            def placed():
+                for segment, args in zip(meshes, arguments(), strict=True):
+                    where = work / "mesh" if spill is None else spill.fragments
+                    yield (str(where / str(int(segment))), *args)
+
             if map_objects is None:
                 # objects side by side: the coarser levels' collapses are most of the
-                # work, and their kernels leave the interpreter free
+                # work, and their kernels leave the interpreter free (one level:
+                # Draco's encoder mostly holds it, and 15,625 small objects took as
+                # long on two threads as on one). Unsharded, each thread writes its
+                # object's fragments; sharded, they wait in the one spill file.
                 threads = object_threads or (kernel_threads() if lods > 1 else 1)
-                done = threaded_in_order(encode_object, arguments(), threads)
+                if spec is None:
+                    done = threaded_in_order(_encode_and_write, placed(), threads)
+                else:
+                    done = threaded_in_order(encode_object, arguments(), threads)
                 stack.callback(done.close)
             else:
                 # elsewhere (a cluster's workers): each task writes its object's
                 # fragments into the part folder itself when it sees it, and only
                 # the manifest comes back (see write_object)
-                def placed():
-                    for segment, args in zip(meshes, arguments(), strict=True):
-                        where = work / "mesh" if spill is None else spill.fragments
-                        yield (str(where / str(int(segment))), str(folder), *args)
-
-                done = map_objects(write_object, placed())
+                done = map_objects(
+                    write_object, ((where, str(folder), *args) for where, *args in placed())
+                )
                 if hasattr(done, "close"):  # stops the work left when this fails
                     stack.callback(done.close)
             for segment, (manifest, data) in zip(meshes, done, strict=True):
@@ -538,16 +547,21 @@ def write_object(target: str, layer: str, *args) -> tuple[bytes, bytes | int]:
     """
     from ..atomic import DISK_FULL_ERRNOS, disk_full_error
 
-    manifest, data = encode_object(*args)
-    path = Path(target)
-    if not path.parent.is_dir():  # the client's part folder is not on this machine
-        return manifest, data
+    if not Path(target).parent.is_dir():  # the client's part folder is not on this machine
+        return encode_object(*args)
     try:
-        path.write_bytes(data)
+        return _encode_and_write(target, *args)
     except OSError as exc:  # the client removes the part folder on this error
         if exc.errno in DISK_FULL_ERRNOS:
-            raise disk_full_error(layer, len(data), why="while a worker wrote an object") from None
+            raise disk_full_error(layer, 0, why="while a worker wrote an object") from None
         raise OutputError(f"{layer}: a worker could not write an object ({exc.strerror})") from None
+
+
+def _encode_and_write(target: str, *args) -> tuple[bytes, int]:
+    """:func:`encode_object`, its fragment data written to ``target``: the manifest
+    and the data's size."""
+    manifest, data = encode_object(*args)
+    Path(target).write_bytes(data)
     return manifest, len(data)
 
 
