@@ -362,7 +362,7 @@ def _convert_levels_to_layer(
 ) -> list[ConvertResult]:
     """:func:`convert_levels` into one precomputed layer: level n (in the order
     given) is the layer's object n + 1, all written once every level is extracted."""
-    from .writers.precomputed import check_layer, data_type_for, write_precomputed
+    from .writers.precomputed import check_layer, data_type_for, object_file, write_precomputed
 
     writer = WRITERS.get(opts.format)
     if opts.normals or opts.values is not None or opts.with_volume:
@@ -409,12 +409,13 @@ def _convert_levels_to_layer(
         # within --max-memory, one object's coarser levels at a time
         object_threads=1 if opts.blocks.max_memory else None,
     )
-    name = (lambda n: f"{n}:0") if opts.legacy_mesh else str
+
+    def where(n: int) -> Path:
+        return Path(output) / "mesh" / object_file(n, len(meshes), sharded=opts.sharded,
+                                                   legacy=opts.legacy_mesh)  # fmt: skip
+
     return [
-        ConvertResult(
-            volume, meshes[n], Path(output) / "mesh" / name(n), writer.name, False, extracted[n]
-        )
-        for n in meshes
+        ConvertResult(volume, meshes[n], where(n), writer.name, False, extracted[n]) for n in meshes
     ]
 
 

@@ -34,7 +34,7 @@ from .post.pipeline import EmptyMeshError, post_process
 from .threads import kernel_threads, threaded_in_order
 from .volume import Volume
 from .writers import check_attributes, output_format
-from .writers.precomputed import check_layer, data_type_for, write_precomputed
+from .writers.precomputed import check_layer, data_type_for, object_file, write_precomputed
 from .writers.precomputed_volume import volume_data_type
 from .writers.stored import write_mesh
 
@@ -145,9 +145,12 @@ def convert_labels(
         progress("writing")
         path = write_mesh(mesh, output, format=writer.name, ascii=opts.ascii, force=opts.force)
         return [ConvertResult(volume, mesh, path, writer.name, opts.ascii)]
+    count = len(surfaces.labels)
     outputs = (
         [
-            Path(output) / "mesh" / _layer_object(label, opts.legacy_mesh)
+            Path(output)
+            / "mesh"
+            / object_file(label, count, sharded=opts.sharded, legacy=opts.legacy_mesh)  # fmt: skip
             for label in surfaces.labels
         ]
         if writer.layer
@@ -230,11 +233,6 @@ def convert_labels(
         )  # fmt: skip
         for label, path in zip(made, outputs, strict=True)
     ]
-
-
-def _layer_object(label: int, legacy: bool) -> str:
-    """The file of a layer's object: its fragments (multi-resolution) or manifest (legacy)."""
-    return f"{label}:0" if legacy else str(label)
 
 
 #: Of the face-neighbouring sample pairs inside labels (neither background), the

@@ -670,3 +670,33 @@ def test_the_layer_does_not_depend_on_the_thread_count(tmp_path, labelled, monke
     for name in one:
         if (tmp_path / "1" / name).is_file():
             assert (tmp_path / "1" / name).read_bytes() == (tmp_path / "2" / name).read_bytes()
+
+
+@pytest.mark.parametrize("form", ["plain", "sharded", "legacy"])
+def test_each_objects_result_names_the_file_that_holds_it(tmp_path, form):
+    """What a run reports as written (``wrote ...``) is the file holding the object:
+    its fragments, its legacy manifest, or the shard its id hashes to (4913 objects
+    need two shards: the spec's identity hash, shard = id >> minishard bits)."""
+    from isoconvert.label_convert import convert_labels
+
+    n = 17 if form == "sharded" else 3
+    z, y, x = np.mgrid[: 8 * n, : 8 * n, : 8 * n]
+    cell = (z // 8) * n * n + (y // 8) * n + x // 8 + 1
+    ball = ((z % 8 - 3.5) ** 2 + (y % 8 - 3.5) ** 2 + (x % 8 - 3.5) ** 2) < 3.2**2
+    np.save(tmp_path / "balls.npy", np.where(ball, cell, 0).astype(np.uint16).T)
+    options = {"sharded": form == "sharded", "legacy_mesh": form == "legacy"}
+    results = convert_labels(tmp_path / "balls.npy", tmp_path / "layer", format="precomputed",
+                             lods=1, **options)  # fmt: skip
+    assert len(results) == n**3
+    mesh = tmp_path / "layer" / "mesh"
+    if form == "sharded":
+        spec = json.loads((mesh / "info").read_text())["sharding"]
+        shards = sorted(p.name for p in mesh.glob("*.shard"))
+        assert len(shards) == 2 and sorted({r.output.name for r in results}) == shards
+        for label, result in enumerate(results, start=1):
+            number = (label >> spec["minishard_bits"]) & ((1 << spec["shard_bits"]) - 1)
+            assert int(result.output.name.removesuffix(".shard"), 16) == number
+    else:
+        names = [f"{label}:0" if form == "legacy" else str(label) for label in range(1, 28)]
+        assert [r.output.name for r in results] == names
+    assert all(r.output.is_file() and r.output.parent == mesh for r in results)

@@ -597,6 +597,23 @@ def _write_legacy(
     )
 
 
+def object_file(segment: int, objects: int, *, sharded: bool = False, legacy: bool = False) -> str:
+    """The file of a layer's mesh folder that holds ``segment``, one of ``objects``:
+    its fragments (multi-resolution), its manifest (legacy) or its shard."""
+    if legacy:
+        return f"{segment}:0"
+    if not sharded:
+        return str(segment)
+    spec = _sharding(objects)
+    shard = (segment >> spec["minishard_bits"]) & ((1 << spec["shard_bits"]) - 1)
+    return _shard_name(shard, spec)
+
+
+def _shard_name(shard: int, spec: dict) -> str:
+    digits = max(1, -(-spec["shard_bits"] // 4))
+    return f"{shard:0{digits}x}.shard"
+
+
 def _sharding(objects: int) -> dict:
     """A sharding specification for ``objects`` segments: the identity hash (segment
     ids are the labels, spread over the low bits already), about 64 objects per
@@ -627,7 +644,6 @@ def _write_shards(folder: Path, objects: _ObjectSpill, spec: dict) -> None:
         minishard = segment & (minishards - 1)
         shard = (segment >> spec["minishard_bits"]) & ((1 << spec["shard_bits"]) - 1)
         shards.setdefault(shard, {}).setdefault(minishard, []).append(segment)
-    digits = max(1, -(-spec["shard_bits"] // 4))
     for shard, by_minishard in shards.items():
         order, indices, at = [], [], 0
         for minishard in range(minishards):
@@ -655,7 +671,7 @@ def _write_shards(folder: Path, objects: _ObjectSpill, spec: dict) -> None:
             index.append((place, place + len(encoded)))
             tail.append(encoded)
             place += len(encoded)
-        with open(folder / f"{shard:0{digits}x}.shard", "wb") as out:
+        with open(folder / _shard_name(shard, spec), "wb") as out:
             out.write(np.array(index, dtype="<u8").tobytes())
             for segment in order:
                 out.write(objects.read(segment))
