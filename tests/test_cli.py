@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -309,3 +310,22 @@ def test_help_and_info_do_not_import_numba():
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
+
+
+def test_the_runs_time_is_said_once_for_many_meshes(tmp_path, capsys):
+    """One line per mesh written, then the run's time once: on every line it read as
+    each file's own time."""
+    labels = np.zeros((12, 10, 8), np.uint8)
+    labels[1:5, 1:5, 1:5], labels[6:10, 2:8, 2:6], labels[2:4, 6:9, 5:7] = 1, 2, 3
+    np.save(tmp_path / "l.npy", labels)
+    code, out, _ = run(capsys, "convert", tmp_path / "l.npy", "--labels", "-o", tmp_path / "l.ply")
+    lines = out.strip().splitlines()
+    assert code == 0 and len(lines) == 4
+    assert [line.split(":")[0] for line in lines[:3]] == [
+        f"wrote {tmp_path / f'l_label{n}.ply'}" for n in (1, 2, 3)
+    ]
+    assert all(line.endswith(f"(label {n})") for n, line in zip((1, 2, 3), lines, strict=False))
+    assert re.fullmatch(r"3 meshes written in \d+\.\d\d s", lines[3])
+    one = ["convert", tmp_path / "l.npy", "--label", "2", "-o", tmp_path / "2.ply"]
+    code, out, _ = run(capsys, *one)
+    assert code == 0 and re.search(r"\(label 2, \d+\.\d\d s\)$", out.strip())

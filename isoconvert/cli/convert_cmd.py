@@ -153,15 +153,20 @@ def convert(
                 what = f"labels {what}"
             else:
                 what = f"label {what:g}" if by_label else f"level {what:g}"
+            # the run's time once: on each of many lines it read as each file's
+            took = f", {time.perf_counter() - start:.2f} s" if len(results) == 1 else ""
             print(
                 f"wrote {result.output}: {made.n_vertices:,} vertices, {made.n_cells:,} {kind} "
-                f"({what}{done}, {time.perf_counter() - start:.2f} s)"
+                f"({what}{done}{took})"
             )
         if report is not None or required:
             target = reports[n] if reports else report
             failed += _report_result(result, target, required, examples, force, quiet)
         if preview is not None:
             _write_preview(result, preview, output, len(results), force, quiet)
+    if not quiet and len(results) > 1:
+        where = f" into {output}" if options.format == "precomputed" else ""
+        print(f"{len(results)} meshes written{where} in {time.perf_counter() - start:.2f} s")
     if failed:
         raise typer.Exit(EXIT_CHECK_FAILED)
 
