@@ -154,6 +154,63 @@ def test_a_file_larger_than_the_budget_is_read_in_slabs(tmp_path, monkeypatch):
     assert all(r == (0, 120) for r in reads)
 
 
+def _small_cubes(z: int = 60, n: int = 48) -> np.ndarray:
+    """(Z, Y, X) uint8: a cube of 2 voxels in every 3-voxel cell, each labelled
+    (labels repeat, never side by side): a volume dense with surfaces."""
+    k, j, i = np.mgrid[:z, :n, :n]
+    cell = (k // 3) * 256 + (j // 3) * 16 + i // 3
+    inside = (k % 3 < 2) & (j % 3 < 2) & (i % 3 < 2)
+    return np.where(inside, cell % 250 + 1, 0).astype(np.uint8)
+
+
+def test_the_boundary_count_is_the_nets_quads():
+    """The estimate the slabs are sized by counts a quad for every pair of samples
+    with different labels (the outside counting as background): the kernel's own
+    quads, exactly, on random labels and on cubes touching the grid's faces."""
+    rng = np.random.default_rng(8)
+    for data in (_labels(rng, (23, 17, 19), 4, True), _small_cubes(14, 12)):
+        count = label_blocks.boundary_layers(Volume(data.T), 0, Blocks(max_memory=1 << 16))
+        assert count.shape == (data.shape[0],)
+        quads = label_surfaces(Volume(data.T), smoothing=0).combined.n_cells // 2
+        assert int(count.sum()) == quads
+
+
+def test_within_the_budget_a_volume_dense_with_surfaces_is_built_in_slabs(tmp_path, monkeypatch):
+    """Its samples fit --max-memory, its net's kernel memory would not (about 220 bytes
+    a vertex): it is built in slabs, each estimated within half the budget but at the
+    halo's floor, and the net is the whole's, bit for bit."""
+    data = _small_cubes()
+    np.save(tmp_path / "cubes.npy", data)
+    volume = read_volume(tmp_path / "cubes.npy")
+    slabs = []
+    original = label_blocks.run_label_slab
+
+    def recording(job, zyx):
+        slabs.append((job.k0, job.k1))
+        return original(job, zyx)
+
+    monkeypatch.setattr(label_blocks, "run_label_slab", recording)
+    budget = 16 << 20
+    got = label_surfaces(volume, smoothing=0, blocks=Blocks(max_memory=budget))
+    count = label_blocks.boundary_layers(volume, 0, Blocks(max_memory=budget))
+    assert int(count.sum()) * label_blocks.NET_BYTES_PER_VERTEX > budget // 2 > data.nbytes
+    assert len(slabs) > 2 and slabs[0][0] == 0 and slabs[-1][1] == data.shape[0] + 1
+    assert all(b == c for (_, b), (c, _) in zip(slabs, slabs[1:], strict=False))
+    halo = label_blocks.halo_layers(0)
+    prefix = np.concatenate([[0], np.cumsum(count)])
+    for k0, k1 in slabs[:-1]:
+        z0, z1 = max(0, k0 - 1 - halo), min(len(count), k1 + 1 + halo)
+        kernel = int(prefix[z1] - prefix[z0]) * label_blocks.NET_BYTES_PER_VERTEX
+        assert kernel <= budget // 2 or k1 - k0 == halo
+    monkeypatch.setattr(label_blocks, "run_label_slab", original)
+    _same(label_surfaces(Volume(data.T), smoothing=0), got)
+    # a budget its net fits: one piece, as before
+    slabs.clear()
+    monkeypatch.setattr(label_blocks, "run_label_slab", recording)
+    label_surfaces(volume, smoothing=0, blocks=Blocks(max_memory=1 << 30))
+    assert slabs == []
+
+
 def test_bad_label_volumes_in_slabs_fail_in_one_line():
     data = np.zeros((5, 5, 30), np.float32)
     data[1:3, 1:3, 2:5] = 1

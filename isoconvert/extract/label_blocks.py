@@ -56,7 +56,7 @@ import numpy as np
 from .. import _native
 from ..atomic import DISK_FULL_ERRNOS, disk_full_error
 from ..errors import IsoconvertError, VolumeError
-from ..grid import LazyGrid, SlabReader
+from ..grid import LazyGrid, SlabReader, grid_slab_zyx
 from ..memory import file_array, release
 from ..runner import TaskFailure, cluster_size
 from ..runner.local import read_ahead
@@ -93,6 +93,67 @@ _SPILL_WHY = (
     "for the label slabs, larger than a quarter of --max-memory (a larger one keeps "
     "more of them in memory)"
 )
+
+
+#: Bytes a label net's kernel holds per vertex while it builds the net (the quads,
+#: the smoothing's positions, stencil and buffers): about 200 measured (15,625 small
+#: cubes: 660 MB for 3.4 M vertices at 16 iterations). Within ``--max-memory`` the
+#: slabs of a volume dense with surfaces are sized by it, not only by its samples.
+NET_BYTES_PER_VERTEX = 220
+
+
+def boundary_layers(volume: Volume, background: int, blocks: Blocks) -> np.ndarray:
+    """(Z,) int64: per sample layer, the face-neighbouring sample pairs with different
+    labels (those within the layer, to the next one, and to the outside at the grid's
+    faces, which counts as background): a quad each, about a vertex each on closed
+    surfaces, so about the net's vertices there. Read in slabs of a quarter of the
+    budget (the samples as stored, and a byte a sample for each comparison)."""
+    nx, ny, nz = (int(n) for n in volume.shape)
+    layer = nx * ny * (np.dtype(volume.dtype).itemsize + 2)
+    step = max(1, blocks.budget // 4 // layer - 1)
+    counts = np.zeros(nz, np.int64)
+    for z0 in range(0, nz, step):
+        own = min(step, nz - z0)
+        a = grid_slab_zyx(volume.samples, z0, min(nz, z0 + own + 1))  # one more: z pairs
+        inside = a[:own] != background
+        n = np.count_nonzero(a[:own, :, 1:] != a[:own, :, :-1], axis=(1, 2))
+        n += np.count_nonzero(a[:own, 1:, :] != a[:own, :-1, :], axis=(1, 2))
+        pairs = np.count_nonzero(a[1:] != a[:-1], axis=(1, 2))  # to the next layer
+        if len(a) > own:
+            n += pairs
+        else:  # the grid's last layer: its far face instead
+            n[:-1] += pairs
+            n[-1] += np.count_nonzero(inside[-1])
+        # the grid's side faces
+        n += np.count_nonzero(inside[:, :, [0, -1]], axis=(1, 2))
+        n += np.count_nonzero(inside[:, [0, -1], :], axis=(1, 2))
+        counts[z0 : z0 + own] = n
+    counts[0] += np.count_nonzero(grid_slab_zyx(volume.samples, 0, 1) != background)
+    return counts
+
+
+def net_plan(boundary: np.ndarray, halo: int, own: int, limit: int) -> list[tuple[int, int]]:
+    """Owned dual-layer ranges ``[k0, k1)`` (as :func:`slab_ranges`) whose slabs'
+    estimated kernel memory, halo included, stays within ``limit`` bytes: at most
+    ``own`` layers each, at least ``halo`` (thinner slabs would read the volume more
+    than three times over, and their halo would be most of their kernel's work)."""
+    nz = len(boundary)
+    prefix = np.concatenate([[0], np.cumsum(boundary)])
+
+    def kernel(k0: int, k1: int) -> int:
+        z0, z1 = max(0, k0 - 1 - halo), min(nz, k1 + 1 + halo)
+        return int(prefix[z1] - prefix[z0]) * NET_BYTES_PER_VERTEX
+
+    cuts = [0]
+    while cuts[-1] < nz + 1:
+        k0 = cuts[-1]
+        k1 = min(nz + 1, k0 + max(1, min(halo, own)))
+        while k1 < min(nz + 1, k0 + own) and kernel(k0, k1 + 1) <= limit:
+            k1 += 1
+        cuts.append(k1)
+    if len(cuts) > 2 and cuts[-1] - cuts[-2] < 2:  # the last slab owns two layers or more
+        del cuts[-2]
+    return list(zip(cuts[:-1], cuts[1:], strict=True))
 
 
 def halo_layers(iterations: int) -> int:
@@ -274,17 +335,35 @@ class MergedNet:
     wanted: np.ndarray
 
 
-def wants_blocks(volume: Volume, blocks: Blocks | None, itemsize: int) -> bool:
+def wants_blocks(
+    volume: Volume, blocks: Blocks | None, itemsize: int, boundary: np.ndarray | None = None
+) -> bool:
     """Whether to build ``volume``'s net slab by slab: asked for (``--block-size``,
     a scheduler), or read from its file and larger than one slab's share of the
-    budget. A volume that fits is built whole (no halo, no merge)."""
+    budget, or (``boundary``, :func:`boundary_layers`) its net's kernel memory
+    would pass half the budget. A volume that fits is built whole (no halo, no
+    merge)."""
     if blocks is None or volume.ndim != 3:
         return False
     if blocks.asked:
         return True
     if volume.grid is None:
         return False
+    if boundary is not None and int(boundary.sum()) * NET_BYTES_PER_VERTEX > blocks.budget // 2:
+        return True
     return blocks.layers(volume.shape, itemsize) < volume.shape[2]
+
+
+def wants_net_estimate(volume: Volume, blocks: Blocks | None) -> bool:
+    """Whether to count ``volume``'s label boundaries first (:func:`boundary_layers`):
+    within ``--max-memory``, read from its file, no ``--block-size`` given."""
+    return (
+        blocks is not None
+        and blocks.max_memory is not None
+        and blocks.size is None
+        and volume.ndim == 3
+        and volume.grid is not None
+    )
 
 
 def slab_jobs(
@@ -298,9 +377,11 @@ def slab_jobs(
     blocks: Blocks,
     itemsize: int,
     on_status: Callable[[str], None] | None = None,
+    boundary: np.ndarray | None = None,
 ) -> list[LabelSlabJob]:
     """The slabs of ``volume``: ``--block-size`` owned layers each, or what fits
-    the budget with the halo; on a cluster, enough for each of its threads."""
+    the budget with the halo (the samples, and with ``boundary`` the net's kernel
+    memory, :func:`net_plan`); on a cluster, enough for each of its threads."""
     nx, ny, nz = (int(n) for n in volume.shape)
     halo = halo_layers(iterations)
     if blocks.size is not None:
@@ -321,7 +402,10 @@ def slab_jobs(
             threads = max(1, cluster_size(blocks.scheduler))
             own = max(1, min(own, -(-(nz + 1) // (_SLABS_PER_THREAD * threads))))
     # dual layers 0..Z: Z + 1 of them
-    ranges = slab_ranges(nz + 1, own)
+    if boundary is not None and blocks.size is None:
+        ranges = net_plan(boundary, halo, own, blocks.budget // 2)
+    else:
+        ranges = slab_ranges(nz + 1, own)
     return [
         LabelSlabJob(
             k0=k0,

@@ -98,7 +98,15 @@ from ..memory import release, release_freed_memory
 from ..mesh import Mesh, MeshSummary
 from ..threads import kernel_threads
 from ..volume import Volume
-from .label_blocks import MergedNet, merge_slabs, run_slabs, slab_jobs, wants_blocks
+from .label_blocks import (
+    MergedNet,
+    boundary_layers,
+    merge_slabs,
+    run_slabs,
+    slab_jobs,
+    wants_blocks,
+    wants_net_estimate,
+)
 from .label_samples import fit_background, kernel_labels
 from .placement import mesh_info, reversed_orientation
 from .prepare import kernel_type
@@ -382,9 +390,14 @@ def label_surfaces(
     # positions, with the two roundings of Volume.index_to_world (a product, a sum)
     aligned = np.array_equal(volume.direction, np.eye(3))
     placed = False
-    if wants_blocks(volume, blocks, itemsize):
+    # within --max-memory, a volume dense with surfaces is built in slabs even when
+    # its samples fit: its net's kernel memory, not the samples, is the peak
+    boundary = None
+    if wants_net_estimate(volume, blocks):
+        boundary = boundary_layers(volume, background, blocks)
+    if wants_blocks(volume, blocks, itemsize, boundary):
         net = _net_in_slabs(volume, labels, background, options, reverse, blocks, itemsize,
-                            on_status)  # fmt: skip
+                            on_status, boundary)  # fmt: skip
         wanted = net.wanted
         positions, dual_cells, corners, quad_labels, sides = (
             net.positions, net.dual_cells, net.corners, net.quad_labels, net.sides)  # fmt: skip
@@ -463,6 +476,7 @@ def _net_in_slabs(
     blocks: Blocks,
     itemsize: int,
     on_status: Callable[[str], None] | None,
+    boundary: np.ndarray | None = None,
 ) -> MergedNet:
     """The net of ``volume`` built slab by slab (see :mod:`.label_blocks`), with the
     labels checked against every slab's once all are seen."""
@@ -472,7 +486,8 @@ def _net_in_slabs(
                                    dtype=np.int64))  # fmt: skip
         _wanted_labels(asked, labels, background, volume.source)
     jobs = slab_jobs(volume, asked, background, options.iterations, options.relaxation,
-                     options.constraint, reverse, blocks, itemsize, on_status)  # fmt: skip
+                     options.constraint, reverse, blocks, itemsize, on_status,
+                     boundary=boundary)  # fmt: skip
     slabs: list = []
     held = made = 0  # bytes of the slabs' arrays in memory, and as made
     full = None  # (folder, what) of a full disk
