@@ -330,9 +330,7 @@ def convert_levels(
     by_suffix = WRITERS.by_suffix(Path(output).suffix)
     if on_status and by_suffix and by_suffix[0] != writer.name:
         on_status(f"note: writing {writer.name} into {output}, whose extension says {by_suffix[0]}")
-    refuse_shared([*outputs, *also_writes])
-    for path in [*outputs, *also_writes]:  # the input file itself, before its header is read
-        refuse_inputs(path, input_file(input))
+    refuse_given_outputs(input, [*outputs, *also_writes])
     from .attributes import check_3d
     from .extract.dispatch import default_method
 
@@ -374,9 +372,7 @@ def _convert_levels_to_layer(
     level_outputs(output, levels)  # the same level twice is an error here too
     check_layer(output, opts.force, opts.layer_lods, [input], opts.fragment_size,
                 sharded=opts.sharded, legacy=opts.legacy_mesh)  # fmt: skip
-    refuse_shared([output, *also_writes])
-    for path in also_writes:
-        refuse_inputs(path, input_file(input))
+    refuse_given_outputs(input, also_writes, folder=output)
     from .extract.dispatch import default_method
 
     progress("reading")
@@ -492,6 +488,17 @@ def bounded_collapse(mesh: Mesh, bound: float) -> Mesh:
     from .post.decimate import decimate
 
     return decimate(mesh, max_error=bound)
+
+
+def refuse_given_outputs(
+    input: str | Path, outputs: Sequence[str | Path], folder: str | Path | None = None
+) -> None:
+    """Before the input's header is read: refuse two outputs (or ``folder``, a
+    layer's, and an output) that are one file, and an output that is the input
+    file itself."""
+    refuse_shared([*([folder] if folder is not None else []), *outputs])
+    for path in outputs:
+        refuse_inputs(path, input_file(input))
 
 
 def refuse_outputs_read(outputs: Sequence[str | Path], *volumes: Volume | None) -> None:

@@ -10,20 +10,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import (
-    check_output,
-    input_file,
-    output_stream,
-    refuse_inputs,
-    refuse_shared,
-    refuse_stream,
-)
+from .atomic import check_output, input_file, output_stream, refuse_stream
 from .convert import (
     ConvertOptions,
     ConvertResult,
     bounded_collapse,
     layer_objects_on,
     read_input,
+    refuse_given_outputs,
     refuse_layer_options,
     refuse_outputs_read,
 )
@@ -117,9 +111,7 @@ def convert_labels(
         for n, path in enumerate(label_outputs(output, opts.labels)):
             check_output(path, opts.force, inputs=input_file(input), probe=n == 0)
     known = [output] if opts.single_file or writer.layer else label_outputs(output, opts.labels)
-    refuse_shared([*known, *also_writes])
-    for path in [*known, *also_writes]:  # the input itself, before its header is read
-        refuse_inputs(path, input_file(input))
+    refuse_given_outputs(input, [*known, *also_writes])
     progress("reading")
     volume = read_input(input, opts)
     refuse_outputs_read([*known, *also_writes], volume)

@@ -154,6 +154,19 @@ def test_a_file_larger_than_the_budget_is_read_in_slabs(tmp_path, monkeypatch):
     assert all(r == (0, 120) for r in reads)
 
 
+def _slabs_built(monkeypatch, note) -> list:
+    """What ``note(job, zyx)`` says of each slab built from now on (in this process)."""
+    seen = []
+    original = label_blocks.run_label_slab
+
+    def recording(job, zyx):
+        seen.append(note(job, zyx))
+        return original(job, zyx)
+
+    monkeypatch.setattr(label_blocks, "run_label_slab", recording)
+    return seen
+
+
 def _small_cubes(z: int = 60, n: int = 48) -> np.ndarray:
     """(Z, Y, X) uint8: a cube of 2 voxels in every 3-voxel cell, each labelled
     (labels repeat, never side by side): a volume dense with surfaces."""
@@ -182,14 +195,7 @@ def test_within_the_budget_a_volume_dense_with_surfaces_is_built_in_slabs(tmp_pa
     data = _small_cubes()
     np.save(tmp_path / "cubes.npy", data)
     volume = read_volume(tmp_path / "cubes.npy")
-    slabs = []
-    original = label_blocks.run_label_slab
-
-    def recording(job, zyx):
-        slabs.append((job.k0, job.k1))
-        return original(job, zyx)
-
-    monkeypatch.setattr(label_blocks, "run_label_slab", recording)
+    slabs = _slabs_built(monkeypatch, lambda job, zyx: (job.k0, job.k1))
     budget = 16 << 20
     got = label_surfaces(volume, smoothing=0, blocks=Blocks(max_memory=budget))
     count = label_blocks.boundary_layers(volume, 0, Blocks(max_memory=budget))
@@ -202,11 +208,9 @@ def test_within_the_budget_a_volume_dense_with_surfaces_is_built_in_slabs(tmp_pa
         z0, z1 = max(0, k0 - 1 - halo), min(len(count), k1 + 1 + halo)
         kernel = int(prefix[z1] - prefix[z0]) * label_blocks.NET_BYTES_PER_VERTEX
         assert kernel <= budget // 2 or k1 - k0 == halo
-    monkeypatch.setattr(label_blocks, "run_label_slab", original)
-    _same(label_surfaces(Volume(data.T), smoothing=0), got)
+    _same(label_surfaces(Volume(data.T), smoothing=0), got)  # (in memory: no slab)
     # a budget its net fits: one piece, as before
     slabs.clear()
-    monkeypatch.setattr(label_blocks, "run_label_slab", recording)
     label_surfaces(volume, smoothing=0, blocks=Blocks(max_memory=1 << 30))
     assert slabs == []
 
@@ -302,14 +306,7 @@ def test_label_slabs_are_read_in_the_narrowest_type(tmp_path, monkeypatch):
     data = _labels(rng, (90, 12, 14), 3, True).astype(np.uint32)  # (Z, Y, X) in the file
     wide = data.copy()
     wide[70, 5, 5] = 300  # in a later slab, past uint8 after the first pieces
-    seen = []
-    original = label_blocks.run_label_slab
-
-    def recording(job, zyx):
-        seen.append((job.z0, zyx.dtype))
-        return original(job, zyx)
-
-    monkeypatch.setattr(label_blocks, "run_label_slab", recording)
+    seen = _slabs_built(monkeypatch, lambda job, zyx: (job.z0, zyx.dtype))
     for name, labels in (("narrow", data), ("wide", wide)):
         np.save(tmp_path / f"{name}.npy", labels)
         seen.clear()
