@@ -700,3 +700,26 @@ def test_each_objects_result_names_the_file_that_holds_it(tmp_path, form):
         names = [f"{label}:0" if form == "legacy" else str(label) for label in range(1, 28)]
         assert [r.output.name for r in results] == names
     assert all(r.output.is_file() and r.output.parent == mesh for r in results)
+
+
+def test_a_worker_that_may_not_write_the_folder_sends_the_object_back(tmp_path, monkeypatch):
+    """write_object, a cluster's task: where it sees the part folder but may not write
+    there (a worker of another user, a read-only mount) it sends the fragment data
+    back for the client to write, as where it does not see the folder at all."""
+    from pathlib import Path
+
+    from isoconvert.writers.precomputed import encode_object, write_object
+
+    mesh = _balls(1)[1]
+    args = (mesh.vertices, mesh.cells, np.zeros(3), np.eye(3), 1, 16, None, None)
+    expected = encode_object(*args)
+    assert write_object(str(tmp_path / "1"), "layer", *args) == (expected[0], len(expected[1]))
+    assert (tmp_path / "1").read_bytes() == expected[1]
+    assert write_object(str(tmp_path / "elsewhere" / "2"), "layer", *args) == expected
+
+    def refused(self, data):
+        raise PermissionError(13, "Permission denied", str(self))
+
+    monkeypatch.setattr(Path, "write_bytes", refused)
+    assert write_object(str(tmp_path / "3"), "layer", *args) == expected
+    assert not (tmp_path / "3").exists()

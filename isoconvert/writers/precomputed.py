@@ -55,13 +55,14 @@ Dask cluster's workers with ``--scheduler``, as :func:`write_object`). There eac
 task writes its object's fragment data into the layer's part folder itself (the
 folder is on a file system the workers share) and sends back only the manifest;
 the client writes the manifests (or, sharded, the shards from the tasks' files)
-and renames the folder into place. A worker that does not see the folder sends
-the data back instead.
+and renames the folder into place. A worker that does not see the folder, or may
+not write there, sends the data back instead.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import shutil
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -547,14 +548,21 @@ def write_object(target: str, layer: str, *args) -> tuple[bytes, bytes | int]:
     """
     from ..atomic import DISK_FULL_ERRNOS, disk_full_error
 
+    manifest, data = encode_object(*args)
     if not Path(target).parent.is_dir():  # the client's part folder is not on this machine
-        return encode_object(*args)
+        return manifest, data
     try:
-        return _encode_and_write(target, *args)
-    except OSError as exc:  # the client removes the part folder on this error
+        Path(target).write_bytes(data)
+    except OSError as exc:  # the client removes the part folder on an error
         if exc.errno in DISK_FULL_ERRNOS:
             raise disk_full_error(layer, 0, why="while a worker wrote an object") from None
+        if isinstance(exc, PermissionError) or exc.errno == errno.EROFS:
+            # a worker of another user, or a read-only mount: the client writes it
+            with contextlib.suppress(OSError):
+                Path(target).unlink(missing_ok=True)
+            return manifest, data
         raise OutputError(f"{layer}: a worker could not write an object ({exc.strerror})") from None
+    return manifest, len(data)
 
 
 def _encode_and_write(target: str, *args) -> tuple[bytes, int]:
