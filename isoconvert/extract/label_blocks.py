@@ -39,9 +39,13 @@ its file, a slab's samples are held in the narrowest type that holds its labels
 arrays would pass a quarter of the budget, those only the merge reads wait in
 nameless files as each slab comes, and so does the merged net
 (:func:`~isoconvert.memory.file_array`), whose pages are given back after each
-step and each label's surface. What is not bounded by the budget: a slab's own
-kernel working memory (about 200 MB for a 512^2 slab at 16 iterations, its
-halo included), and each label's surface while it is written.
+step and each label's surface. Within ``--max-memory`` the slabs are sized by
+their nets too: each layer's label boundaries are counted first
+(:func:`boundary_layers`) and each slab's kernel kept within half the budget
+(:func:`net_plan`). What is not bounded by the budget: a slab's kernel working
+memory where the halo alone passes it (about 200 MB for a 512^2 slab of a
+surface-dense volume at 16 iterations), and each label's surface while it is
+written.
 """
 
 from __future__ import annotations
