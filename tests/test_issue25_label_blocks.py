@@ -209,6 +209,12 @@ def test_within_the_budget_a_volume_dense_with_surfaces_is_built_in_slabs(tmp_pa
         kernel = int(prefix[z1] - prefix[z0]) * label_blocks.NET_BYTES_PER_VERTEX
         assert kernel <= budget // 2 or k1 - k0 == halo
     _same(label_surfaces(Volume(data.T), smoothing=0), got)  # (in memory: no slab)
+    # not counted where that is not wanted: no budget, a given slab size, a cluster
+    # (whose workers read the slabs; here the client would read the whole volume)
+    for blocks in (Blocks(), Blocks(size=8, max_memory=budget),
+                   Blocks(max_memory=budget, scheduler="tcp://127.0.0.1:1")):  # fmt: skip
+        assert not label_blocks.wants_net_estimate(volume, blocks)
+    assert not label_blocks.wants_net_estimate(Volume(data.T), Blocks(max_memory=budget))
     # a budget its net fits: one piece, as before
     slabs.clear()
     label_surfaces(volume, smoothing=0, blocks=Blocks(max_memory=1 << 30))

@@ -360,11 +360,13 @@ def wants_blocks(
 
 def wants_net_estimate(volume: Volume, blocks: Blocks | None) -> bool:
     """Whether to count ``volume``'s label boundaries first (:func:`boundary_layers`):
-    within ``--max-memory``, read from its file, no ``--block-size`` given."""
+    within ``--max-memory``, read from its file, no ``--block-size`` given, and no
+    cluster (whose workers read the slabs: the client would read the whole volume)."""
     return (
         blocks is not None
         and blocks.max_memory is not None
         and blocks.size is None
+        and blocks.scheduler is None
         and volume.ndim == 3
         and volume.grid is not None
     )
