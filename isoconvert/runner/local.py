@@ -8,6 +8,7 @@ files with :func:`run_in_processes`.
 
 from __future__ import annotations
 
+import queue
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -54,31 +55,50 @@ def read_ahead(
     """
     if not items:
         return
-    ahead = None
-    for i, item in enumerate(items):
-        loaded = wait_for(ahead) if ahead is not None else load(item)
-        following = items[i + 1] if i + 1 < len(items) else None
-        go = following is not None and (ready is None or ready(following))
-        ahead = _load_in_thread(load, following) if go else None
-        yield item, loaded
-        del loaded
+    reader = _Reader(load)
+    try:
+        ahead = None
+        for i, item in enumerate(items):
+            loaded = wait_for(ahead) if ahead is not None else load(item)
+            following = items[i + 1] if i + 1 < len(items) else None
+            go = following is not None and (ready is None or ready(following))
+            ahead = reader.submit(following) if go else None
+            yield item, loaded
+            del loaded
+    finally:
+        reader.close()
 
 
-def _load_in_thread(load: Callable[[T], L], item: T) -> Future:
-    """``load(item)`` in a daemon thread of its own: a Ctrl-C while it reads ends
-    the run at once (a pool's thread would be waited for, at the pool's exit and
-    again at the interpreter's)."""
-    future: Future = Future()
+class _Reader:
+    """``load(item)`` for each item submitted, in one daemon thread: a Ctrl-C while
+    it reads ends the run at once (a pool's thread would be waited for, at the pool's
+    exit and again at the interpreter's). One thread for every item: a thread per
+    item spreads the slabs over malloc's arenas (a 512 MiB volume's run within 128M
+    peaked 30 MB higher)."""
 
-    def run() -> None:
-        future.set_running_or_notify_cancel()
-        try:
-            future.set_result(load(item))
-        except BaseException as exc:  # handed to the caller, who re-raises it
-            future.set_exception(exc)
+    def __init__(self, load: Callable[[T], L]) -> None:
+        self._load = load
+        self._requests: queue.SimpleQueue = queue.SimpleQueue()
+        threading.Thread(target=self._run, name="isoconvert-read", daemon=True).start()
 
-    threading.Thread(target=run, name="isoconvert-read", daemon=True).start()
-    return future
+    def submit(self, item: T) -> Future:
+        future: Future = Future()
+        self._requests.put((item, future))
+        return future
+
+    def close(self) -> None:
+        """Stop after the read in progress (not waited for)."""
+        self._requests.put(None)
+
+    def _run(self) -> None:
+        while (request := self._requests.get()) is not None:
+            item, future = request
+            future.set_running_or_notify_cancel()
+            try:
+                future.set_result(self._load(item))
+            except BaseException as exc:  # handed to the caller, who re-raises it
+                future.set_exception(exc)
+            del item, future, request  # the result is the caller's alone
 
 
 def run_in_processes(
