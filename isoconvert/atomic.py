@@ -106,6 +106,18 @@ def input_file(input: str | Path) -> list[Path]:
     return [Path(input)] if Path(input).is_file() else []
 
 
+def refuse_given_outputs(
+    input: str | Path, outputs: Iterable[str | Path], folder: str | Path | None = None
+) -> None:
+    """Before the input's header is read: refuse two outputs (or ``folder``, a
+    layer's, and an output) that are one file, and an output that is the input
+    file itself."""
+    outputs = list(outputs)
+    refuse_shared([*([folder] if folder is not None else []), *outputs])
+    for path in outputs:
+        refuse_inputs(path, input_file(input))
+
+
 def refuse_inputs(path: str | Path, inputs: Iterable[str | Path]) -> None:
     """Raise OutputError when writing ``path`` would replace a file being read.
 

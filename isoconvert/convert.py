@@ -20,8 +20,8 @@ from .atomic import (
     check_output,
     input_file,
     output_stream,
+    refuse_given_outputs,
     refuse_inputs,
-    refuse_shared,
     refuse_stream,
 )
 from .errors import FormatError, IsoconvertError, OutputError
@@ -488,17 +488,6 @@ def bounded_collapse(mesh: Mesh, bound: float) -> Mesh:
     from .post.decimate import decimate
 
     return decimate(mesh, max_error=bound)
-
-
-def refuse_given_outputs(
-    input: str | Path, outputs: Sequence[str | Path], folder: str | Path | None = None
-) -> None:
-    """Before the input's header is read: refuse two outputs (or ``folder``, a
-    layer's, and an output) that are one file, and an output that is the input
-    file itself."""
-    refuse_shared([*([folder] if folder is not None else []), *outputs])
-    for path in outputs:
-        refuse_inputs(path, input_file(input))
 
 
 def refuse_outputs_read(outputs: Sequence[str | Path], *volumes: Volume | None) -> None:

@@ -10,14 +10,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import check_output, input_file, output_stream, refuse_stream
+from .atomic import check_output, input_file, output_stream, refuse_given_outputs, refuse_stream
 from .convert import (
     ConvertOptions,
     ConvertResult,
     bounded_collapse,
     layer_objects_on,
     read_input,
-    refuse_given_outputs,
     refuse_layer_options,
     refuse_outputs_read,
 )

@@ -165,7 +165,10 @@ def convert(
         if preview is not None:
             _write_preview(result, preview, output, len(results), force, quiet)
     if not quiet and len(results) > 1:
-        where = f" into {output}" if options.format == "precomputed" else ""
+        from ..writers import WRITERS
+
+        layer = options.format is not None and WRITERS.get(options.format).layer
+        where = f" into {output}" if layer else ""
         print(f"{len(results)} meshes written{where} in {time.perf_counter() - start:.2f} s")
     if failed:
         raise typer.Exit(EXIT_CHECK_FAILED)

@@ -128,11 +128,12 @@ def boundary_layers(volume: Volume, background: int, blocks: Blocks) -> np.ndarr
         else:  # the grid's last layer: its far face instead
             n[:-1] += pairs
             n[-1] += np.count_nonzero(inside[-1])
-        # the grid's side faces
+        # the grid's side faces, and its near face
         n += np.count_nonzero(inside[:, :, [0, -1]], axis=(1, 2))
         n += np.count_nonzero(inside[:, [0, -1], :], axis=(1, 2))
+        if z0 == 0:
+            n[0] += np.count_nonzero(inside[0])
         counts[z0 : z0 + own] = n
-    counts[0] += np.count_nonzero(grid_slab_zyx(volume.samples, 0, 1) != background)
     return counts
 
 

@@ -613,8 +613,13 @@ def object_file(segment: int, objects: int, *, sharded: bool = False, legacy: bo
     if not sharded:
         return str(segment)
     spec = _sharding(objects)
-    shard = (segment >> spec["minishard_bits"]) & ((1 << spec["shard_bits"]) - 1)
-    return _shard_name(shard, spec)
+    return _shard_name(_shard_of(segment, spec)[0], spec)
+
+
+def _shard_of(segment: int, spec: dict) -> tuple[int, int]:
+    """(shard, minishard) of ``segment``: the identity hash, no preshift."""
+    minishard = segment & ((1 << spec["minishard_bits"]) - 1)
+    return (segment >> spec["minishard_bits"]) & ((1 << spec["shard_bits"]) - 1), minishard
 
 
 def _shard_name(shard: int, spec: dict) -> str:
@@ -648,9 +653,8 @@ def _write_shards(folder: Path, objects: _ObjectSpill, spec: dict) -> None:
 
     minishards = 1 << spec["minishard_bits"]
     shards: dict[int, dict[int, list[int]]] = {}
-    for segment in sorted(objects.sizes):  # identity hash, no preshift
-        minishard = segment & (minishards - 1)
-        shard = (segment >> spec["minishard_bits"]) & ((1 << spec["shard_bits"]) - 1)
+    for segment in sorted(objects.sizes):
+        shard, minishard = _shard_of(segment, spec)
         shards.setdefault(shard, {}).setdefault(minishard, []).append(segment)
     for shard, by_minishard in shards.items():
         order, indices, at = [], [], 0
