@@ -33,6 +33,11 @@ the peer), beside the best and median times. The pipelines:
   layer of one level of detail, unsharded, ``--sharded`` and ``--legacy-mesh``, against
   the zmesh + cloud-volume script (which writes the legacy format): the costs per
   object rather than per voxel.
+- ``layer-one``: one large object (a bumpy ball in a 448^3 uint8 volume, 1.5 million
+  triangles) to a layer of one level cut into 64-voxel fragments, within ``--max-memory
+  256M`` and whole, beside the same surface as a PLY within that budget (the bound the
+  other outputs keep) and the zmesh + cloud-volume script (one legacy fragment):
+  the peak of cutting one large object.
 - ``normals``: a 384^3 float32 gyroid (raw) to binary PLY with and without ``--normals``.
   Target 1.3x.
 - ``ct-bound``: the chest CT (DICOM series, 512x512x64, level 300.5 HU) decimated with
@@ -363,6 +368,44 @@ def many_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
     return commands, [(c.name, peer, None) for c in commands[:3]]
 
 
+def one_object_volume(n: int = 448) -> np.ndarray:
+    """(X, Y, Z) uint8: one label, a ball of radius about 190 voxels with five bumps
+    around z (1.5 million triangles as a label surface)."""
+    x, y, z = np.ogrid[:n, :n, :n]
+    radius = np.sqrt((x - n / 2) ** 2 + (y - n / 2) ** 2 + (z - n / 2) ** 2)
+    bumps = 12 * np.sin(5 * np.arctan2(y - n / 2, x - n / 2))
+    return (radius < 190 + bumps).astype(np.uint8)
+
+
+def one_object_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
+    """One object of 1.5 million triangles cut into fragments, within a budget and
+    whole: what cutting a large object holds."""
+    volume = tmp / "one_object.npy"
+    if not volume.exists():
+        np.save(volume, np.ascontiguousarray(one_object_volume().T))
+    (tmp / "zmesh_layer.py").write_text(ZMESH_LAYER)
+    base = [exe, "convert", str(volume), "--labels", "-f", "-q"]
+    layer = [*base, "--format", "precomputed", "--lods", "1", "--fragment-size", "64"]
+    budget = ["--max-memory", LARGE_BUDGET]
+    commands = [
+        Command(
+            f"isoconvert fragments 64 --max-memory {LARGE_BUDGET}",
+            layer + budget + ["-o", str(tmp / "one_b")],
+        ),  # fmt: skip
+        Command("isoconvert fragments 64, in memory", layer + ["-o", str(tmp / "one_m")]),
+        Command(
+            f"isoconvert PLY --max-memory {LARGE_BUDGET}",
+            base + budget + ["-o", str(tmp / "one.ply")],
+        ),  # fmt: skip
+        Command(
+            "zmesh + cloud-volume script (legacy)",
+            [sys.executable, str(tmp / "zmesh_layer.py"), str(volume), str(tmp / "one_zl")],
+        ),
+    ]
+    peer = "zmesh + cloud-volume script (legacy)"
+    return commands, [(commands[0].name, commands[2].name, None), (commands[1].name, peer, None)]
+
+
 #: --max-memory of the large layer: half the 512 MB volume.
 LARGE_BUDGET = "256M"
 
@@ -448,6 +491,7 @@ PIPELINES = {
         large_layer_pipeline,
     ),
     "layer-many": ("15,625 small objects (200^3 uint32): a layer", many_layer_pipeline),
+    "layer-one": ("one object, 1.5 M triangles (448^3 uint8): a layer", one_object_layer_pipeline),
     "normals": ("gyroid 384^3 float32 -> PLY, with and without --normals", normals_pipeline),
     "ct-print": ("chest CT -> printable STL", ct_print_pipeline),
 }
