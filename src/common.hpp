@@ -155,15 +155,15 @@ void parallel_for(i64 n, int threads, i64 grain, F &&fn) {
 // rays.cpp): `each(item, emit)` calls `emit(bucket)` for every bucket the item
 // is listed in, the same ones each time it is called; bucket b then holds
 // entries[offsets[b] .. offsets[b + 1]], its items in increasing order.
-template <class Each>
+template <class Each, class Entry>
 void fill_buckets(i64 n_items, i64 n_buckets, Each &&each, std::vector<i64> &offsets,
-                  std::vector<i64> &entries) {
+                  std::vector<Entry> &entries) {
   offsets.assign(n_buckets + 1, 0);
   for (i64 k = 0; k < n_items; ++k) each(k, [&](i64 b) { ++offsets[b + 1]; });
   for (i64 b = 0; b < n_buckets; ++b) offsets[b + 1] += offsets[b];
   entries.resize(offsets[n_buckets]);
   std::vector<i64> fill(offsets.begin(), offsets.end() - 1);
-  for (i64 k = 0; k < n_items; ++k) each(k, [&](i64 b) { entries[fill[b]++] = k; });
+  for (i64 k = 0; k < n_items; ++k) each(k, [&](i64 b) { entries[fill[b]++] = Entry(k); });
 }
 
 // A grid vertex is positive when its value is >= the level (Definition 2.1).

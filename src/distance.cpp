@@ -166,13 +166,29 @@ class MidpointMemo {
   std::uint64_t generation_ = 0;
 };
 
+// Triangle and vertex numbers as the grid keeps them: a mesh's index list is
+// most of a grid's memory (decimation keeps its input's grid throughout), and no
+// mesh that fits in memory has 2^32 triangles.
+using Index = std::uint32_t;
+
 struct Grid {
   Vec origin{};
   double size = 1.0;
   i64 dims[3] = {1, 1, 1};
   std::vector<i64> offsets;  // bucket b holds triangles[offsets[b] .. offsets[b + 1]]
-  std::vector<i64> triangles;
+  std::vector<Index> triangles;
 };
+
+// A coordinate as a float no larger (down) or no smaller (up): boxes kept in
+// float32 still hold their triangles, so they only ever prune less.
+inline float down(double x) {
+  const float f = float(x);
+  return double(f) > x ? std::nextafter(f, -std::numeric_limits<float>::infinity()) : f;
+}
+inline float up(double x) {
+  const float f = float(x);
+  return double(f) < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
+}
 
 // Buckets half as large as the median grown triangle box: a few buckets
 // per triangle and few triangles per bucket (measured on a CT surface:
@@ -180,7 +196,7 @@ struct Grid {
 // have far more buckets than triangles (any size gives the same answers).
 // Points outside the grid are farther than the radius from every triangle.
 // `box`: each triangle's bounding box (lower x, y, z, upper x, y, z).
-Grid build_grid(const std::vector<double> &box, i64 n_tri, double radius) {
+Grid build_grid(const std::vector<float> &box, i64 n_tri, double radius) {
   Grid g;
   std::vector<double> extent(n_tri);
   double mn[3], mx[3];
@@ -228,15 +244,15 @@ Grid build_grid(const std::vector<double> &box, i64 n_tri, double radius) {
 // for distances to its input after every collapse).
 class TriangleGrid {
  public:
-  TriangleGrid(std::vector<double> v, std::vector<i64> t, double radius)
+  TriangleGrid(std::vector<double> v, std::vector<Index> t, double radius)
       : v_(std::move(v)), t_(std::move(t)), n_tri_(i64(t_.size() / 3)) {
     box_.resize(6 * n_tri_);
     for (i64 f = 0; f < n_tri_; ++f) {
       for (int k = 0; k < 3; ++k) {
         const double a = v_[3 * t_[3 * f] + k], b = v_[3 * t_[3 * f + 1] + k];
         const double c = v_[3 * t_[3 * f + 2] + k];
-        box_[6 * f + k] = std::min(std::min(a, b), c);
-        box_[6 * f + 3 + k] = std::max(std::max(a, b), c);
+        box_[6 * f + k] = down(std::min(std::min(a, b), c));
+        box_[6 * f + 3 + k] = up(std::max(std::max(a, b), c));
       }
     }
     if (n_tri_) g_ = build_grid(box_, n_tri_, radius);
@@ -260,7 +276,7 @@ class TriangleGrid {
     for (i64 e = g.offsets[b]; e < g.offsets[b + 1]; ++e) {
       const i64 f = g.triangles[e];
       // a triangle whose box is already farther than the best cannot be nearer
-      const double *lo = &box_[6 * f], *hi = lo + 3;
+      const float *lo = &box_[6 * f], *hi = lo + 3;
       double box2 = 0.0;
       for (int k = 0; k < 3; ++k) {
         const double gap = std::max(std::max(lo[k] - c[k], c[k] - hi[k]), 0.0);
@@ -400,10 +416,10 @@ class TriangleGrid {
   }
 
   std::vector<double> v_;
-  std::vector<i64> t_;
+  std::vector<Index> t_;
   i64 n_tri_;
   Grid g_;
-  std::vector<double> box_;  // per triangle: lower x, y, z, upper x, y, z
+  std::vector<float> box_;  // per triangle: lower x, y, z, upper x, y, z (outwards)
 };
 
 }  // namespace
@@ -423,18 +439,22 @@ void bind_distance(nb::module_ &m) {
               throw std::invalid_argument("TriangleGrid: radius must be finite and >= 0");
             }
             const i64 n_vertices = i64(vertices.shape(0)), n_tri = i64(triangles.shape(0));
+            if (n_vertices > i64(std::numeric_limits<Index>::max()) ||
+                n_tri > i64(std::numeric_limits<Index>::max())) {
+              throw std::invalid_argument("TriangleGrid: at most 2^32 - 1 vertices and triangles");
+            }
             for (i64 k = 0; k < 3 * n_tri; ++k) {
               if (triangles.data()[k] < 0 || triangles.data()[k] >= n_vertices) {
                 throw std::invalid_argument("TriangleGrid: a triangle index is not a vertex");
               }
             }
             for (i64 k = 0; k < 3 * n_vertices; ++k) {
-              if (!std::isfinite(vertices.data()[k])) {
-                throw std::invalid_argument("TriangleGrid: vertices must be finite");
+              if (!(std::abs(vertices.data()[k]) <= 1e37)) {  // a float32 box holds it
+                throw std::invalid_argument("TriangleGrid: vertices must be finite, within 1e37");
               }
             }
             std::vector<double> v(vertices.data(), vertices.data() + 3 * n_vertices);
-            std::vector<i64> t(triangles.data(), triangles.data() + 3 * n_tri);
+            std::vector<Index> t(triangles.data(), triangles.data() + 3 * n_tri);
             nb::gil_scoped_release unlocked;
             new (self) TriangleGrid(std::move(v), std::move(t), radius);
           },
