@@ -13,6 +13,21 @@ from isoconvert.post.decimate import TriangleGrid, within_bound
 pytest.importorskip("rtree", reason="trimesh.proximity needs rtree")
 
 
+def test_a_triangle_nearer_by_less_than_float32_rounding_is_still_found():
+    """The grid keeps triangle boxes in float32, rounded outwards so that they
+    only prune less. Two walls facing the point at x = 0.1 and 0.1 + 1e-10: the
+    farther one, listed first, is the best so far when the nearer one's box is
+    tested, and 0.1 rounded to the nearest float32 (0.10000000149) would put
+    that box beyond it."""
+    near = 0.1
+    walls = []
+    for x in (near + 1e-10, near):  # the farther wall first
+        walls += [[x, -1.0, -1.0], [x, 2.0, -1.0], [x, -1.0, 2.0]]
+    cells = np.array([[0, 1, 2], [3, 4, 5]])
+    grid = TriangleGrid(np.array(walls), cells, 1.0)
+    distance, nearest = grid.distances(np.zeros((1, 3)))
+    assert nearest[0] == 1 and distance[0] == near
+
 def test_distances_equal_trimesh_within_the_radius_and_exceed_it_beyond():
     sphere = trimesh.creation.icosphere(subdivisions=4)
     rng = np.random.default_rng(0)
