@@ -567,6 +567,11 @@ class Net {
     }
     number(true);
     const i64 nv = chunk_nv[size_t(nchunks)], ne = chunk_ne[size_t(nchunks)];
+    if (nv > i64(std::numeric_limits<i32>::max()) || Z_ + o_.z_offset > (i64(1) << 30) ||
+        X_ > (i64(1) << 30) || Y_ > (i64(1) << 30)) {
+      // the stencil's and the centres' 32 bits (about 400 GB of net: never reached)
+      throw std::invalid_argument("label_net: more than 2^31 - 1 vertices or 2^30 samples an axis");
+    }
     std::vector<const Cell *> split_cells;  // cells of two or more vertices (few)
     for (auto &part : chunk_split) split_cells.insert(split_cells.end(), part.begin(), part.end());
     count_cells(out);
@@ -581,7 +586,8 @@ class Net {
     Vec<u8> junction(static_cast<size_t>(nv));
     // the smoothing stencil, only for smoothing (unsmoothed: 40 bytes a vertex less)
     const bool stencil = o_.iterations > 0;
-    Vec<i64> nb(static_cast<size_t>(stencil ? ne : 0));
+    // (vertex numbers of one slab or volume: 32 bits, checked where the net is numbered)
+    Vec<i32> nb(static_cast<size_t>(stencil ? ne : 0));
     Vec<i64> nboff(static_cast<size_t>(stencil ? nv + 1 : 0));
     iso::parallel_for(i64(chunks_.size()), o_.threads, 1, [&](int, i64 b, i64 e) {
       for (i64 c = b; c < e; ++c) {
@@ -597,7 +603,7 @@ class Net {
     for (const Cell *c : split_cells) split_vertices.emplace_back(c->first, c->nsheets);
     Vec<double> pos = smooth(cell_of, junction, nb, nboff, split_cells);
     // the stencil is not read again: its memory is the output's below
-    Vec<i64>().swap(nb);
+    Vec<i32>().swap(nb);
     Vec<i64>().swap(nboff);
     Vec<u8>().swap(junction);
     // copies that still coincide (none seen in tests): the note counts them
@@ -919,7 +925,7 @@ class Net {
   }
 
   void fill(Chunk &ch, i64 *corners, u8 *flip, i64 *pairs, i32 *sides, i64 *cell_of,
-            u8 *sheet_of, u8 *junction, i64 *nb, i64 *nboff) {
+            u8 *sheet_of, u8 *junction, i32 *nb, i64 *nboff) {
     const i64 cy = Y_ + 1;
     auto row = [&](i64 y, i64 z) {
       return (y < 0 || z < 0 || y > Y_ || z > Z_) ? Row{} : rows_[size_t(z * cy + y)];
@@ -963,7 +969,7 @@ class Net {
               const int fc = kT.gap_face[d][g];
               if (!((c->kept >> fc) & 1)) continue;
               if (mode != 0 && gap_of_group(mode, group(mode, g)) != g) continue;
-              nb[write[c->sheet(fc)]++] = n->first + n->sheet(kT.gap_face[other][g]);
+              nb[write[c->sheet(fc)]++] = i32(n->first + n->sheet(kT.gap_face[other][g]));
               if (mode == 0) break;
             }
           }
@@ -1056,19 +1062,21 @@ class Net {
 
   // Constrained relaxation (Jacobi): see labels.py. Junction vertices follow
   // junction neighbours only and stay put where junction curves meet.
-  Vec<double> smooth(const Vec<i64> &cell_of, const Vec<u8> &junction, Vec<i64> &nb,
+  Vec<double> smooth(const Vec<i64> &cell_of, const Vec<u8> &junction, Vec<i32> &nb,
                      const Vec<i64> &nboff, const std::vector<const Cell *> &split_cells) {
     const i64 nv = i64(cell_of.size());
     const i64 cx = X_ + 1, cy = Y_ + 1;
-    // the centres (the boxes of the constraint) only for smoothing
-    Vec<double> pos(static_cast<size_t>(3 * nv)), centers(size_t(o_.iterations ? 3 * nv : 0));
-    double *box = o_.iterations ? centers.data() : pos.data();
+    // the centres (the boxes of the constraint) only for smoothing, each as twice
+    // itself (2 c - 1 for grid coordinate c: a whole number, exact in 32 bits)
+    Vec<double> pos(static_cast<size_t>(3 * nv));
+    Vec<i32> centers(size_t(o_.iterations ? 3 * nv : 0));
     iso::parallel_for(nv, o_.threads, 1 << 15, [&](int, i64 b, i64 e) {
       for (i64 p = b; p < e; ++p) {
         const i64 id = cell_of[size_t(p)];
         const i64 c[3] = {id % cx, (id / cx) % cy, id / (cx * cy) + o_.z_offset};
         for (int k = 0; k < 3; ++k) {
-          box[3 * p + k] = pos[size_t(3 * p + k)] = double(c[k]) - 0.5;
+          pos[size_t(3 * p + k)] = double(c[k]) - 0.5;
+          if (o_.iterations) centers[size_t(3 * p + k)] = i32(2 * c[k] - 1);
         }
       }
     });
@@ -1091,10 +1099,12 @@ class Net {
     for (int it = 0; it < o_.iterations; ++it) {
       // plain pointers and scalars copied into the loop: a store to `to` may not
       // alias them, so nothing is reloaded per vertex
-      const double *from_pos = pos.data(), *centre = centers.data();
+      const double *from_pos = pos.data();
+      const i32 *twice = centers.data();
       double *to = next.data();
       const i32 *deg = degree.data();
-      const i64 *off = nboff.data(), *nbr = nb.data();
+      const i64 *off = nboff.data();
+      const i32 *nbr = nb.data();
       iso::parallel_for(nv, o_.threads, 1 << 14, [=](int, i64 b, i64 e) {
         const double r = relax, k_ = half;
         for (i64 p = b; p < e; ++p) {
@@ -1112,7 +1122,7 @@ class Net {
           for (int a = 0; a < 3; ++a) {
             const double x = from_pos[3 * p + a];
             const double moved = x + r * (t[a] / d - x);
-            const double c = centre[3 * p + a];
+            const double c = 0.5 * double(twice[3 * p + a]);
             to[3 * p + a] = std::min(std::max(moved, c - k_), c + k_);
           }
         }

@@ -101,8 +101,10 @@ _SPILL_WHY = (
 
 #: Bytes a label net's kernel holds per vertex while it builds the net (the quads,
 #: the smoothing's positions, stencil and buffers): about 200 measured (15,625 small
-#: cubes: 660 MB for 3.4 M vertices at 16 iterations). Within ``--max-memory`` the
-#: slabs of a volume dense with surfaces are sized by it, not only by its samples.
+#: cubes: 660 MB for 3.4 M vertices at 16 iterations), about 175 since the stencil
+#: and the constraint's centres take 32 bits (the estimate keeps its margin).
+#: Within ``--max-memory`` the slabs of a volume dense with surfaces are sized by
+#: it, not only by its samples.
 NET_BYTES_PER_VERTEX = 220
 
 
