@@ -191,6 +191,9 @@ def convert_labels(
             map_objects=layer_objects_on(opts, volume.source),
             # within --max-memory, one object's coarser levels at a time
             object_threads=1 if opts.blocks.max_memory else None,
+            # one level cut into fragments: each label's rows from the net, never its
+            # whole surface (post-processed surfaces are whole already)
+            parts=surfaces.parts if meshes is None else None,
         )
     made = surfaces.labels  # the labels extracted (``labels`` may name none)
     if not writer.layer:  # (a layer's object files are the outputs named above)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -405,6 +407,32 @@ class MeshSummary:
     @classmethod
     def of(cls, mesh: Mesh) -> MeshSummary:
         return cls(mesh.n_vertices, mesh.n_cells, mesh.is_triangles, mesh.info)
+
+
+class MeshParts(Protocol):
+    """A triangle mesh handed over a part at a time, for a consumer that needs
+    only the triangles near one place at once (a layer's row of fragments): an
+    object whose whole mesh would be the peak of a run is never built whole.
+
+    ``to_index`` maps world points ``(N, 3)`` to the coordinates the parts are
+    selected in, each point on its own (the same values however many are given).
+    """
+
+    def extent(self, to_index: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """The lowest and highest ``to_index`` coordinates of its vertices, (3,) each."""
+        ...
+
+    def reaching(
+        self, to_index: Callable[[np.ndarray], np.ndarray], low: float, high: float
+    ) -> Mesh:
+        """At least every triangle whose ``to_index`` z-range meets ``[low, high]``,
+        in the whole mesh's order, over its vertices in theirs (a whole mesh's
+        triangles and vertices, some left out)."""
+        ...
+
+    def whole(self) -> Mesh:
+        """The whole mesh."""
+        ...
 
 
 def _import(module: str, package: str):

@@ -586,6 +586,37 @@ def test_triangles_crossing_several_rows_of_fragments_are_cut_alike_in_each(tmp_
     assert abs(union.area / trimesh.Trimesh(vertices, mesh.cells).area - 1) < 1e-4
 
 
+@pytest.mark.parametrize("sharded", [False, True])
+def test_fragments_made_from_each_labels_parts_are_those_of_its_whole_surface(
+    tmp_path, labelled, monkeypatch, sharded
+):
+    """One level cut into fragments, from each label's parts (the net's quads that
+    reach each row of fragments): the same bytes as from the whole surfaces, on
+    the oblique volume (index coordinates from a rotation), while no label's whole
+    surface is built; the summaries are the surfaces' counts."""
+    volume, _ = labelled
+    common = dict(unit="µm", data_type="uint16", chunk=6.0, sharded=sharded)
+    whole = label_surfaces(volume, smoothing=16)
+    grid = next(iter(whole.meshes.values())).info["grid"]
+    expected = {label: (m.n_vertices, m.n_cells) for label, m in whole.meshes.items()}
+    write_precomputed(tmp_path / "whole", whole.meshes, grid, **common)
+    parted = label_surfaces(volume, smoothing=16)
+    built = []
+    real = type(parted)._build
+    monkeypatch.setattr(
+        type(parted), "_build", lambda self, label: built.append(label) or real(self, label)
+    )
+    write_precomputed(tmp_path / "parts", parted.meshes, grid, parts=parted.parts, **common)
+    assert built == []  # every label is larger than one fragment
+    for path in sorted((tmp_path / "whole").rglob("*")):
+        if path.is_file():
+            twin = tmp_path / "parts" / path.relative_to(tmp_path / "whole")
+            assert twin.read_bytes() == path.read_bytes(), path.name
+    assert {label: (parted.summary(label).n_vertices, parted.summary(label).n_cells)
+            for label in parted.labels} == expected  # fmt: skip
+    assert built == []
+
+
 def test_a_sharded_layer_holds_the_same_objects(tmp_path):
     """--sharded: 150 labels in shard files; cloud-volume reads every label at every
     level as from the unsharded layer, and the mesh info validates."""

@@ -276,6 +276,11 @@ class LabelMeshes:
             maps = self._maps.setdefault(label, tuple(built))
         return maps[which - 1]
 
+    def parts(self, label: int) -> LabelParts:
+        """Label ``label``'s surface in parts (:class:`~isoconvert.mesh.MeshParts`),
+        built from the net a part at a time; its summary is kept as its mesh's is."""
+        return LabelParts(self, int(label))
+
     def _build(self, label: int) -> tuple[Mesh, np.ndarray, np.ndarray]:
         """(mesh, vertex map, face map) of ``label``, anew."""
         net = self._net
@@ -286,14 +291,91 @@ class LabelMeshes:
         )
         release(net.corners)  # a net on disk: one label's pages at a time
         release(net.vertices)
+        mesh = Mesh(verts, local, None, self._info(label))
+        self._summaries.setdefault(int(label), MeshSummary.of(mesh))
+        return mesh, used, faces
+
+    def _info(self, label: int) -> dict:
+        """A label's mesh's info."""
+        net = self._net
         info = copy.deepcopy(net.label_info)
         info["level"] = float(label)
         info["label"] = int(label)
         info["smoothing"] = dict(net.info["smoothing"])
-        mesh = Mesh(verts, local, None, info)
-        self._summaries.setdefault(int(label), MeshSummary.of(mesh))
-        return mesh, used, faces
+        return info
 
+
+class LabelParts:
+    """One label's surface in parts (:class:`~isoconvert.mesh.MeshParts`): the
+    triangles of the net's quads that reach a z-range, made by the kernel that
+    makes its whole mesh (``label_mesh``) from only those quads, so that they come
+    in the whole mesh's order over its vertices in theirs. Holds each quad's
+    z-range (16 bytes a quad), not the mesh (about 80).
+    """
+
+    #: Quads whose corners are looked up at once.
+    PIECE = 1 << 18
+
+    def __init__(self, owner: LabelMeshes, label: int) -> None:
+        net = owner._net
+        n = net.index[label]  # KeyError for a label not extracted
+        self._owner, self._label = owner, label
+        self._quads = net.quads[net.offsets[n] : net.offsets[n + 1]]
+        self._inside = int(net.inside[n])
+        self._low = self._high = None
+
+    def extent(self, to_index: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        net = self._owner._net
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        low, high = np.empty(len(self._quads)), np.empty(len(self._quads))
+        for a in range(0, len(self._quads), self.PIECE):
+            corners = net.corners[self._quads[a : a + self.PIECE]]  # (m, 4)
+            z = to_index(net.vertices[corners.reshape(-1)]).reshape(-1, 4, 3)
+            lo, hi = np.minimum(lo, z.min(axis=(0, 1))), np.maximum(hi, z.max(axis=(0, 1)))
+            low[a : a + self.PIECE] = z[:, :, 2].min(axis=1)
+            high[a : a + self.PIECE] = z[:, :, 2].max(axis=1)
+        self._low, self._high = low, high
+        release(net.corners)
+        release(net.vertices)
+        # what the results say of the surface, without building it
+        used = _count_distinct(net.corners[self._quads].reshape(-1))
+        info = self._owner._info(self._label)
+        summary = MeshSummary(used, 2 * len(self._quads), True, info)
+        self._owner._summaries.setdefault(self._label, summary)
+        return lo, hi
+
+    def reaching(
+        self, to_index: Callable[[np.ndarray], np.ndarray], low: float, high: float
+    ) -> Mesh:
+        if self._low is None:
+            self.extent(to_index)
+        net = self._owner._net
+        taken = np.flatnonzero((self._high >= low) & (self._low <= high))
+        # the quads it is inside of come first, as in the whole mesh
+        inside = int(np.searchsorted(taken, self._inside))
+        _, _, local, verts = _native.label_mesh(
+            net.corners, net.cut, net.vertices, self._quads[taken], inside
+        )
+        release(net.corners)
+        release(net.vertices)
+        return Mesh(verts, local)
+
+    def whole(self) -> Mesh:
+        return self._owner.meshes[self._label]
+
+
+
+def _count_distinct(ids: np.ndarray) -> int:
+    """How many distinct values ``ids`` holds: a bitmap over their range when it
+    is not much wider than they are many (a large label's vertices), else a sort."""
+    if not len(ids):
+        return 0
+    lo, hi = int(ids.min()), int(ids.max())
+    if hi - lo >= 16 * len(ids):
+        return len(np.unique(ids))
+    mark = np.zeros(hi - lo + 1, bool)
+    mark[ids - lo] = True
+    return int(np.count_nonzero(mark))
 
 @dataclass(frozen=True)
 class _Net:

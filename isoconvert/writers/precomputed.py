@@ -74,7 +74,7 @@ import numpy as np
 from ..atomic import atomic_folder
 from ..errors import FormatError, IsoconvertError, OutputError, extra_hint
 from ..geometry import normalized_grid
-from ..mesh import Mesh
+from ..mesh import Mesh, MeshParts
 from ..threads import kernel_threads, threaded_in_order
 from ..units import meters_per_unit
 from ..volume import Volume
@@ -256,6 +256,7 @@ def write_precomputed(
     on_status: Callable[[str], None] | None = None,
     map_objects: ObjectMap | None = None,
     object_threads: int | None = None,
+    parts: Callable[[int], MeshParts] | None = None,
 ) -> Path:
     """Write meshes as one Neuroglancer precomputed segmentation layer.
 
@@ -310,6 +311,11 @@ def write_precomputed(
         Objects encoded here at once; None: as many as the kernels' threads when
         there are coarser levels to decimate (each holds its object's collapses),
         else 1.
+    parts : callable or None
+        ``parts(segment)``: the object of ``meshes[segment]`` in parts, for a layer
+        of one level cut into fragments made here: each row of fragments is made
+        from the triangles that reach it, and no object's whole mesh is built (the
+        same bytes). None: every object from its whole mesh.
 
     Returns
     -------
@@ -408,6 +414,20 @@ def write_precomputed(
                     where = work / "mesh" if spill is None else spill.fragments
                     yield (str(where / str(int(segment))), *args)
 
+            # one level cut into fragments here: each object from its parts
+            parted = parts is not None and lods == 1 and chunk is not None and map_objects is None
+
+            def here():
+                if not parted:
+                    yield from ((encode_object, *args) for args in arguments())
+                    return
+                for segment in meshes:
+                    yield (encode_parts, parts(int(segment)), origin, inverse, bits, chunk)
+
+            def placed_here():
+                for segment, args in zip(meshes, here(), strict=True):
+                    yield (str(work / "mesh" / str(int(segment))), *args)
+
             if map_objects is None:
                 # objects side by side: the coarser levels' collapses are most of the
                 # work, and their kernels leave the interpreter free (one level:
@@ -416,9 +436,9 @@ def write_precomputed(
                 # object's fragments; sharded, they wait in the one spill file.
                 threads = object_threads or (kernel_threads() if lods > 1 else 1)
                 if spec is None:
-                    done = threaded_in_order(_encode_and_write, placed(), threads)
+                    done = threaded_in_order(_encode_and_write, placed_here(), threads)
                 else:
-                    done = threaded_in_order(encode_object, arguments(), threads)
+                    done = threaded_in_order(_call, here(), threads)
                 stack.callback(done.close)
             else:
                 # elsewhere (a cluster's workers): each task writes its object's
@@ -519,10 +539,67 @@ def encode_object(
     lods, bits, chunk, decimate
         As :func:`write_precomputed`.
     """
-    index = (np.asarray(vertices, dtype=np.float64) - origin) @ inverse.T
-    full = Mesh(index, np.asarray(cells, dtype=np.int64))
+    full = Mesh(_index_of(vertices, origin, inverse), np.asarray(cells, dtype=np.int64))
     levels = [full] + [decimate(full, float(2 ** (k - 1))) for k in range(1, lods)]
     return _object(levels, bits, _dracopy(), chunk)
+
+
+def encode_parts(
+    parts: MeshParts, origin: np.ndarray, inverse: np.ndarray, bits: int, chunk: float
+) -> tuple[bytes, bytes]:
+    """:func:`encode_object` of one level cut into ``chunk``-wide fragments, from
+    the object's parts: each z-row of nodes from the triangles that reach it
+    (:meth:`~isoconvert.mesh.MeshParts.reaching`), so that the object's whole mesh
+    is never built. The same bytes as :func:`encode_object` of the whole mesh, as
+    :func:`_cut_level` makes each row from the triangles reaching it alone.
+
+    Parameters
+    ----------
+    parts : MeshParts
+        The object, in the world frame.
+    origin, inverse, bits, chunk
+        As :func:`encode_object`.
+    """
+
+    def to_index(world: np.ndarray) -> np.ndarray:
+        return _index_of(world, origin, inverse)
+
+    lo, hi = parts.extent(to_index)
+    grid_origin, shape, cut = _frame(lo, hi, chunk)
+    if not cut:  # one fragment: the whole mesh, which is small
+        whole = parts.whole()
+        return encode_object(whole.vertices, whole.cells, origin, inverse, 1, bits, chunk, None)
+    top = float(2**bits - 1)
+    frame = _Octree(grid_origin, shape, shape, top, lo, hi)
+    reach = shape[2] / top  # as _cut_level takes the triangles of a row
+    level: dict = {}
+    for row in _rows(frame):
+        z0 = grid_origin[2] + row * shape[2]
+        part = parts.reaching(to_index, z0 - reach, z0 + shape[2] + reach)
+        if part.n_cells:
+            index = to_index(part.vertices)
+            level.update(_cut_level(index, np.asarray(part.cells, np.int64), frame, [row]))
+    return _assemble([level], shape, grid_origin, bits, _dracopy())
+
+
+def _index_of(world: np.ndarray, origin: np.ndarray, inverse: np.ndarray) -> np.ndarray:
+    """Index coordinates of world points, ``inverse @ (world - origin)``, one
+    point at a time in the same operations however many are given (a matrix
+    product's kernel may sum a block's rows otherwise than a lone row's), so that
+    an object's parts get its whole mesh's coordinates to the bit.
+
+    Parameters
+    ----------
+    world : (N, 3) float64
+    origin : (3,) float64
+    inverse : (3, 3) float64
+
+    Returns
+    -------
+    (N, 3) float64
+    """
+    d = np.asarray(world, dtype=np.float64) - origin
+    return d[:, 0:1] * inverse[:, 0] + d[:, 1:2] * inverse[:, 1] + d[:, 2:3] * inverse[:, 2]
 
 
 def write_object(target: str, layer: str, *args) -> tuple[bytes, bytes | int]:
@@ -566,12 +643,17 @@ def write_object(target: str, layer: str, *args) -> tuple[bytes, bytes | int]:
     return manifest, len(data)
 
 
-def _encode_and_write(target: str, *args) -> tuple[bytes, int]:
-    """:func:`encode_object`, its fragment data written to ``target``: the manifest
-    and the data's size."""
-    manifest, data = encode_object(*args)
+def _encode_and_write(target: str, encode: Callable, *args) -> tuple[bytes, int]:
+    """``encode(*args)`` (:func:`encode_object` or :func:`encode_parts`), its
+    fragment data written to ``target``: the manifest and the data's size."""
+    manifest, data = encode(*args)
     Path(target).write_bytes(data)
     return manifest, len(data)
+
+
+def _call(function: Callable, *args):
+    """``function(*args)``: a pair of a function and its arguments run on a thread."""
+    return function(*args)
 
 
 def _axis_aligned_at_zero(grid: dict) -> bool:
@@ -748,18 +830,10 @@ def _object(
     planes of its nodes' 2x2x2 partition and its triangles go to the node holding
     their centroid, one z-row of nodes at a time (:func:`_cut_level`).
     """
-    top = float(2**bits - 1)
     lo = np.min([m.vertices.min(axis=0) for m in levels], axis=0)
     hi = np.max([m.vertices.max(axis=0) for m in levels], axis=0)
-    # float32 in the manifest: the box is widened so that float32 rounding of its
-    # origin and shape cannot leave a vertex outside it
-    origin32 = np.nextafter(lo.astype(np.float32), np.float32(-np.inf))
-    grid_origin = origin32.astype(np.float64)
-    box32 = np.nextafter(
-        np.maximum(hi - grid_origin, 1e-6).astype(np.float32), np.float32(np.inf)
-    ).astype(np.float64)
-    cut = not (chunk is None or (box32 <= chunk).all())
-    shape = np.full(3, float(np.float32(chunk))) if cut else box32
+    grid_origin, shape, cut = _frame(lo, hi, chunk)
+    top = float(2**bits - 1)
     nodes: list[dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray] | None]] = []
     for k, mesh in enumerate(levels):
         node = shape * 2.0**k
@@ -777,6 +851,31 @@ def _object(
             used, local = np.unique(cells, return_inverse=True)
         q = np.clip(np.rint((vertices[used] - grid_origin) / node * top), 0, top)
         nodes.append({(0, 0, 0): (q.astype(np.uint32), local.reshape(-1, 3).astype(np.uint32))})
+    return _assemble(nodes, shape, grid_origin, bits, draco)
+
+
+def _frame(
+    lo: np.ndarray, hi: np.ndarray, chunk: float | None
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """An object's octree: its grid origin, its finest nodes' shape, and whether
+    it is cut (``chunk`` given and the object larger than one node)."""
+    # float32 in the manifest: the box is widened so that float32 rounding of its
+    # origin and shape cannot leave a vertex outside it
+    origin32 = np.nextafter(lo.astype(np.float32), np.float32(-np.inf))
+    grid_origin = origin32.astype(np.float64)
+    box32 = np.nextafter(
+        np.maximum(hi - grid_origin, 1e-6).astype(np.float32), np.float32(np.inf)
+    ).astype(np.float64)
+    cut = not (chunk is None or (box32 <= chunk).all())
+    return grid_origin, (np.full(3, float(np.float32(chunk))) if cut else box32), cut
+
+
+def _assemble(
+    nodes: list[dict], shape: np.ndarray, grid_origin: np.ndarray, bits: int, draco
+) -> tuple[bytes, bytes]:
+    """The manifest and the Draco-encoded fragment data of an object's levels
+    (each a dict of node position to quantized vertices and triangles)."""
+    top = float(2**bits - 1)
     # every node's parent is listed too (empty when the coarser level has no
     # triangles there), as the viewer walks the octree down from the top
     for k in range(len(nodes) - 1):
@@ -819,7 +918,7 @@ class _Octree:
 
 
 def _cut_level(
-    vertices: np.ndarray, cells: np.ndarray, frame: _Octree
+    vertices: np.ndarray, cells: np.ndarray, frame: _Octree, rows: Iterable[int] | None = None
 ) -> dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]:
     """One level's fragments: for each node its quantized vertices and triangles.
 
@@ -838,14 +937,17 @@ def _cut_level(
         Index coordinates.
     cells : (C, 3) int64
     frame : _Octree
+    rows : iterable of int or None
+        The z-rows of nodes to make (``vertices`` and ``cells`` then need hold only
+        the triangles that reach them, in the level's order, their vertices in
+        theirs: :func:`encode_parts`); None: every row of the object.
     """
     level: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
     z = vertices[:, 2]
     low = np.minimum(np.minimum(z[cells[:, 0]], z[cells[:, 1]]), z[cells[:, 2]])
     high = np.maximum(np.maximum(z[cells[:, 0]], z[cells[:, 1]]), z[cells[:, 2]])
     reach = frame.node[2] / frame.top  # how far snapping moves a vertex
-    rows = np.floor((np.array([frame.lo[2], frame.hi[2]]) - frame.origin[2]) / frame.node[2])
-    for row in range(max(int(rows[0]), 0), int(rows[1]) + 1):
+    for row in _rows(frame) if rows is None else rows:
         z0 = frame.origin[2] + row * frame.node[2]
         taken = (high >= z0 - reach) & (low <= z0 + frame.node[2] + reach)
         if not taken.any():
@@ -882,6 +984,12 @@ def _cut_level(
             position = tuple(int(x) for x in where[a])
             level[position] = (q.astype(np.uint32), corners.astype(np.uint32))
     return level
+
+
+def _rows(frame: _Octree) -> range:
+    """The z-rows of nodes an object's box reaches."""
+    span = np.floor((np.array([frame.lo[2], frame.hi[2]]) - frame.origin[2]) / frame.node[2])
+    return range(max(int(span[0]), 0), int(span[1]) + 1)
 
 
 def _cut_at_planes(
