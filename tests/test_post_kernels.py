@@ -28,6 +28,7 @@ def test_a_triangle_nearer_by_less_than_float32_rounding_is_still_found():
     distance, nearest = grid.distances(np.zeros((1, 3)))
     assert nearest[0] == 1 and distance[0] == near
 
+
 def test_distances_equal_trimesh_within_the_radius_and_exceed_it_beyond():
     sphere = trimesh.creation.icosphere(subdivisions=4)
     rng = np.random.default_rng(0)

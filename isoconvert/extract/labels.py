@@ -364,7 +364,6 @@ class LabelParts:
         return self._owner.meshes[self._label]
 
 
-
 def _count_distinct(ids: np.ndarray) -> int:
     """How many distinct values ``ids`` holds: a bitmap over their range when it
     is not much wider than they are many (a large label's vertices), else a sort."""
@@ -376,6 +375,7 @@ def _count_distinct(ids: np.ndarray) -> int:
     mark = np.zeros(hi - lo + 1, bool)
     mark[ids - lo] = True
     return int(np.count_nonzero(mark))
+
 
 @dataclass(frozen=True)
 class _Net:
