@@ -313,7 +313,7 @@ class LabelParts:
     z-range (16 bytes a quad), not the mesh (about 80).
     """
 
-    #: Quads whose corners are looked up at once.
+    #: Quads whose corners' positions are converted at once.
     PIECE = 1 << 18
 
     def __init__(self, owner: LabelMeshes, label: int) -> None:
@@ -328,9 +328,9 @@ class LabelParts:
         net = self._owner._net
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
         low, high = np.empty(len(self._quads)), np.empty(len(self._quads))
-        for a in range(0, len(self._quads), self.PIECE):
-            corners = net.corners[self._quads[a : a + self.PIECE]]  # (m, 4)
-            z = to_index(net.vertices[corners.reshape(-1)]).reshape(-1, 4, 3)
+        corners = net.corners[self._quads]  # (n, 4)
+        for a in range(0, len(corners), self.PIECE):
+            z = to_index(net.vertices[corners[a : a + self.PIECE].reshape(-1)]).reshape(-1, 4, 3)
             lo, hi = np.minimum(lo, z.min(axis=(0, 1))), np.maximum(hi, z.max(axis=(0, 1)))
             low[a : a + self.PIECE] = z[:, :, 2].min(axis=1)
             high[a : a + self.PIECE] = z[:, :, 2].max(axis=1)
@@ -338,7 +338,7 @@ class LabelParts:
         release(net.corners)
         release(net.vertices)
         # what the results say of the surface, without building it
-        used = _count_distinct(net.corners[self._quads].reshape(-1))
+        used = _count_distinct(corners.reshape(-1))
         info = self._owner._info(self._label)
         summary = MeshSummary(used, 2 * len(self._quads), True, info)
         self._owner._summaries.setdefault(self._label, summary)

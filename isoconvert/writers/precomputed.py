@@ -409,24 +409,20 @@ def write_precomputed(
             if spec is not None:
                 spill = stack.enter_context(_ObjectSpill(work / "mesh"))
 
-            def placed():
-                for segment, args in zip(meshes, arguments(), strict=True):
+            def placed(tasks):
+                # each task's arguments after the file of its fragment data
+                for segment, args in zip(meshes, tasks, strict=True):
                     where = work / "mesh" if spill is None else spill.fragments
                     yield (str(where / str(int(segment))), *args)
 
-            # one level cut into fragments here: each object from its parts
-            parted = parts is not None and lods == 1 and chunk is not None and map_objects is None
-
             def here():
-                if not parted:
+                # objects encoded here, each with its function: one level cut into
+                # fragments from the object's parts, else from its whole mesh
+                if parts is None or lods != 1 or chunk is None:
                     yield from ((encode_object, *args) for args in arguments())
                     return
                 for segment in meshes:
                     yield (encode_parts, parts(int(segment)), origin, inverse, bits, chunk)
-
-            def placed_here():
-                for segment, args in zip(meshes, here(), strict=True):
-                    yield (str(work / "mesh" / str(int(segment))), *args)
 
             if map_objects is None:
                 # objects side by side: the coarser levels' collapses are most of the
@@ -436,7 +432,7 @@ def write_precomputed(
                 # object's fragments; sharded, they wait in the one spill file.
                 threads = object_threads or (kernel_threads() if lods > 1 else 1)
                 if spec is None:
-                    done = threaded_in_order(_encode_and_write, placed_here(), threads)
+                    done = threaded_in_order(_encode_and_write, placed(here()), threads)
                 else:
                     done = threaded_in_order(_call, here(), threads)
                 stack.callback(done.close)
@@ -445,7 +441,8 @@ def write_precomputed(
                 # fragments into the part folder itself when it sees it, and only
                 # the manifest comes back (see write_object)
                 done = map_objects(
-                    write_object, ((where, str(folder), *args) for where, *args in placed())
+                    write_object,
+                    ((where, str(folder), *args) for where, *args in placed(arguments())),
                 )
                 if hasattr(done, "close"):  # stops the work left when this fails
                     stack.callback(done.close)
@@ -569,13 +566,10 @@ def encode_parts(
     if not cut:  # one fragment: the whole mesh, which is small
         whole = parts.whole()
         return encode_object(whole.vertices, whole.cells, origin, inverse, 1, bits, chunk, None)
-    top = float(2**bits - 1)
-    frame = _Octree(grid_origin, shape, shape, top, lo, hi)
-    reach = shape[2] / top  # as _cut_level takes the triangles of a row
+    frame = _Octree(grid_origin, shape, shape, float(2**bits - 1), lo, hi)
     level: dict = {}
     for row in _rows(frame):
-        z0 = grid_origin[2] + row * shape[2]
-        part = parts.reaching(to_index, z0 - reach, z0 + shape[2] + reach)
+        part = parts.reaching(to_index, *_row_span(frame, row))
         if part.n_cells:
             index = to_index(part.vertices)
             level.update(_cut_level(index, np.asarray(part.cells, np.int64), frame, [row]))
@@ -946,10 +940,9 @@ def _cut_level(
     z = vertices[:, 2]
     low = np.minimum(np.minimum(z[cells[:, 0]], z[cells[:, 1]]), z[cells[:, 2]])
     high = np.maximum(np.maximum(z[cells[:, 0]], z[cells[:, 1]]), z[cells[:, 2]])
-    reach = frame.node[2] / frame.top  # how far snapping moves a vertex
     for row in _rows(frame) if rows is None else rows:
-        z0 = frame.origin[2] + row * frame.node[2]
-        taken = (high >= z0 - reach) & (low <= z0 + frame.node[2] + reach)
+        start, end = _row_span(frame, row)
+        taken = (high >= start) & (low <= end)
         if not taken.any():
             continue
         # the row's vertices in their order in the level (so that each cut takes
@@ -990,6 +983,14 @@ def _rows(frame: _Octree) -> range:
     """The z-rows of nodes an object's box reaches."""
     span = np.floor((np.array([frame.lo[2], frame.hi[2]]) - frame.origin[2]) / frame.node[2])
     return range(max(int(span[0]), 0), int(span[1]) + 1)
+
+
+def _row_span(frame: _Octree, row: int) -> tuple[float, float]:
+    """The z-range whose triangles a row of nodes takes: the row, and a snapping
+    distance (a quantization step) beyond it each way."""
+    start = frame.origin[2] + row * frame.node[2]
+    reach = frame.node[2] / frame.top
+    return start - reach, start + frame.node[2] + reach
 
 
 def _cut_at_planes(
