@@ -436,7 +436,9 @@ def layer_objects_on(opts: ConvertOptions, source: str):
     """Where a layer's objects are encoded (``write_precomputed``'s ``map_objects``):
     with ``--scheduler``, each object is one task of the cluster (its coarser levels
     decimated, everything Draco-encoded and the fragments written by a worker, the
-    manifest sent back and written here, in order); otherwise None, here."""
+    manifest sent back and written here, in order), or, one level cut into
+    fragments from a label's parts, each z-row of its fragments is (the fragments
+    sent back); otherwise None, here."""
     address = opts.blocks.scheduler
     if address is None:
         return None
@@ -446,16 +448,16 @@ def layer_objects_on(opts: ConvertOptions, source: str):
 
     token = uuid.uuid4().hex[:12]
 
-    def on_cluster(function, arguments):
+    def on_cluster(function, layer_tasks):
         tasks = (
             Task(
                 _object_task,
                 (function, *args),
                 key=f"isoconvert-object-{token}-{n}",
-                what=f"{source}: object {n}",
+                what=f"{source}: {what}",
                 nbytes=sum(a.nbytes for a in args if isinstance(a, np.ndarray)),
             )
-            for n, args in enumerate(arguments, start=1)
+            for n, (what, args) in enumerate(layer_tasks, start=1)
         )
         return run_in_order(
             address,

@@ -660,6 +660,58 @@ def test_layer_objects_are_encoded_and_written_by_the_workers(
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".failed")]
 
 
+def _note_encoder(marker: str, function, *args):
+    """A layer's task that notes which encoder it ran, how many triangles it got,
+    and (a row's) the object's box it was one row of."""
+    from isoconvert.convert import _object_task
+
+    encoder = getattr(args[2], "__name__", "an object's arrays")
+    box = args[7].lo.tolist() if encoder == "encode_row" else None
+    with open(marker, "a") as f:
+        f.write(f"{encoder};{len(args[4])};{box}\n")
+    return _object_task(function, *args)
+
+
+@pytest.mark.parametrize("sharded", [False, True])
+def test_one_cut_level_is_encoded_on_the_workers_a_row_of_fragments_per_task(
+    address, monkeypatch, tmp_path, sharded
+):
+    """With a scheduler, a label layer of one level cut into fragments: each task
+    is one z-row of one label's fragments, made of the triangles reaching it (no
+    task gets a whole label, and the client builds none), and the layer is the
+    one written here, byte for byte."""
+    pytest.importorskip("DracoPy")
+    from isoconvert.extract.labels import LabelMeshes, label_surfaces
+    from isoconvert.label_convert import convert_labels
+
+    convert_module = sys.modules["isoconvert.convert"]
+    np.save(tmp_path / "atlas.npy", _atlas())
+    options = {"format": "precomputed", "lods": 1, "fragment_size": 4.0, "sharded": sharded}
+    convert_labels(tmp_path / "atlas.npy", tmp_path / "here", **options)
+    whole = label_surfaces(Volume(_atlas()))
+    triangles = {label: whole[label].n_cells for label in whole.labels}
+    marker = tmp_path / "tasks"
+    monkeypatch.setattr(
+        convert_module, "_object_task", functools.partial(_note_encoder, str(marker))
+    )
+    built = []
+    real = LabelMeshes._build
+    monkeypatch.setattr(LabelMeshes, "_build", lambda self, n: built.append(n) or real(self, n))
+    blocks = Blocks(scheduler=address)
+    convert_labels(tmp_path / "atlas.npy", tmp_path / "there", blocks=blocks, **options)
+    assert built == []
+    tasks = [line.split(";") for line in marker.read_text().splitlines()]
+    assert {encoder for encoder, _, _ in tasks} == {"encode_row"}
+    rows: dict[str, list[int]] = {}  # each label's rows' triangles, labels in order
+    for _, n, box in tasks:
+        rows.setdefault(box, []).append(int(n))
+    assert len(rows) == len(triangles)
+    for (label, count), taken in zip(triangles.items(), rows.values(), strict=True):
+        # several rows, none with every triangle, each triangle in one at least
+        assert len(taken) > 1 and max(taken) < count <= sum(taken), label
+    assert _layer_files(tmp_path / "there") == _layer_files(tmp_path / "here")
+
+
 def test_a_full_disk_while_the_workers_write_fragments_is_one_line(address, tmp_path):
     """A layer of 1.9 MB of fragments onto a 1 MiB tmpfs, its objects written by the
     workers: the one-line disk-full error naming the layer, and the tmpfs empty."""
@@ -668,7 +720,7 @@ def test_a_full_disk_while_the_workers_write_fragments_is_one_line(address, tmp_
 
     from isoconvert.convert import layer_objects_on
     from isoconvert.mesh import Mesh
-    from isoconvert.writers.precomputed import write_object, write_precomputed
+    from isoconvert.writers.precomputed import encode_object, write_object, write_precomputed
 
     rng = np.random.default_rng(3)
     meshes = {}
@@ -694,7 +746,7 @@ def test_a_full_disk_while_the_workers_write_fragments_is_one_line(address, tmp_
         args = (mesh.vertices, mesh.cells, np.zeros(3), np.eye(3), 1, 16, None, None)
         (disk / "filler").write_bytes(b"x" * (2**20 - 8192))
         with pytest.raises(OutputError, match="while a worker wrote an object") as caught:
-            write_object(str(disk / "part" / "1"), "the-layer", *args)
+            write_object(str(disk / "part" / "1"), "the-layer", encode_object, *args)
         assert str(caught.value).startswith("disk full at the-layer")
 
 

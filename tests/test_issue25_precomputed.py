@@ -763,13 +763,14 @@ def test_a_worker_that_may_not_write_the_folder_sends_the_object_back(tmp_path, 
     mesh = _balls(1)[1]
     args = (mesh.vertices, mesh.cells, np.zeros(3), np.eye(3), 1, 16, None, None)
     expected = encode_object(*args)
-    assert write_object(str(tmp_path / "1"), "layer", *args) == (expected[0], len(expected[1]))
+    task = (encode_object, *args)
+    assert write_object(str(tmp_path / "1"), "layer", *task) == (expected[0], len(expected[1]))
     assert (tmp_path / "1").read_bytes() == expected[1]
-    assert write_object(str(tmp_path / "elsewhere" / "2"), "layer", *args) == expected
+    assert write_object(str(tmp_path / "elsewhere" / "2"), "layer", *task) == expected
 
     def refused(self, data):
         raise PermissionError(13, "Permission denied", str(self))
 
     monkeypatch.setattr(Path, "write_bytes", refused)
-    assert write_object(str(tmp_path / "3"), "layer", *args) == expected
+    assert write_object(str(tmp_path / "3"), "layer", *task) == expected
     assert not (tmp_path / "3").exists()

@@ -65,7 +65,8 @@ import contextlib
 import errno
 import json
 import shutil
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -86,8 +87,9 @@ QUANTIZATION_BITS = (10, 16)
 #: Label types a precomputed segmentation may hold.
 _DATA_TYPES = ("uint8", "uint16", "uint32", "uint64")
 
-#: ``map_objects(function, arguments)``: ``function(*args)`` for each tuple, in order.
-ObjectMap = Callable[[Callable[..., tuple[bytes, bytes | int]], Iterable[tuple]], Iterable]
+#: ``map_objects(function, tasks)``: ``function(*args)`` for each ``(what, args)`` of
+#: ``tasks`` (``what`` names the task in errors), the results in order.
+ObjectMap = Callable[[Callable[..., tuple], Iterable[tuple[str, tuple]]], Iterable]
 
 
 def not_a_file(mesh: Mesh, fh, ascii: bool) -> None:
@@ -302,20 +304,22 @@ def write_precomputed(
     on_status : callable or None
         Receives notes.
     map_objects : callable or None
-        ``map_objects(write_object, arguments)``: ``write_object(*args)`` for each
-        tuple of ``arguments`` (an iterable), the results in their order; where the
-        objects are encoded and their fragments written (a Dask cluster's workers,
-        say). None: here, objects side by side on threads when there are coarser
-        levels to decimate.
+        ``map_objects(write_object, tasks)``: ``write_object(*args)`` for each
+        ``(what, args)`` of ``tasks`` (an iterable; ``what``, such as "object 3",
+        names the task in errors), the results in their order; where the objects
+        (or, with ``parts``, their rows of fragments) are encoded (a Dask cluster's
+        workers, say). None: here, objects side by side on threads when there are
+        coarser levels to decimate.
     object_threads : int or None
         Objects encoded here at once; None: as many as the kernels' threads when
         there are coarser levels to decimate (each holds its object's collapses),
         else 1.
     parts : callable or None
         ``parts(segment)``: the object of ``meshes[segment]`` in parts, for a layer
-        of one level cut into fragments made here: each row of fragments is made
-        from the triangles that reach it, and no object's whole mesh is built (the
-        same bytes). None: every object from its whole mesh.
+        of one level cut into fragments: each z-row of fragments is made from the
+        triangles that reach it, one task each (here, or by ``map_objects``), and
+        no object's whole mesh is built (the same bytes). None: every object from
+        its whole mesh.
 
     Returns
     -------
@@ -394,13 +398,6 @@ def write_precomputed(
             mesh_info["sharding"] = spec
         _write_json(work / "mesh" / "info", mesh_info)
 
-        def arguments():
-            # one object at a time: a mapping that builds each mesh when asked for
-            # (label surfaces) holds only the few in flight
-            for segment, mesh in meshes.items():
-                _check_mesh(int(segment), mesh)
-                yield (mesh.vertices, mesh.cells, origin, inverse, lods, bits, chunk, decimate)
-
         # sharded: each object's bytes wait in one file of the part folder as they
         # come (a layer of millions of objects does not fit in memory), and the
         # shards are put together from it at the end
@@ -408,22 +405,9 @@ def write_precomputed(
             spill = None
             if spec is not None:
                 spill = stack.enter_context(_ObjectSpill(work / "mesh"))
-
-            def placed(tasks):
-                # each task's arguments after the file of its fragment data
-                for segment, args in zip(meshes, tasks, strict=True):
-                    where = work / "mesh" if spill is None else spill.fragments
-                    yield (str(where / str(int(segment))), *args)
-
-            def here():
-                # objects encoded here, each with its function: one level cut into
-                # fragments from the object's parts, else from its whole mesh
-                if parts is None or lods != 1 or chunk is None:
-                    yield from ((encode_object, *args) for args in arguments())
-                    return
-                for segment in meshes:
-                    yield (encode_parts, parts(int(segment)), origin, inverse, bits, chunk)
-
+            where = work / "mesh" if spill is None else spill.fragments
+            plans: deque[tuple[int, tuple | None]] = deque()
+            jobs = _tasks(meshes, parts, plans, origin, inverse, lods, bits, chunk, decimate)
             if map_objects is None:
                 # objects side by side: the coarser levels' collapses are most of the
                 # work, and their kernels leave the interpreter free (one level:
@@ -431,29 +415,56 @@ def write_precomputed(
                 # long on two threads as on one). Unsharded, each thread writes its
                 # object's fragments; sharded, they wait in the one spill file.
                 threads = object_threads or (kernel_threads() if lods > 1 else 1)
-                if spec is None:
-                    done = threaded_in_order(_encode_and_write, placed(here()), threads)
-                else:
-                    done = threaded_in_order(_call, here(), threads)
+                done = threaded_in_order(
+                    _call,
+                    (
+                        (_encode_and_write, str(where / str(segment)), encode, *args)
+                        if encode is encode_object and spill is None
+                        else (encode, *args)
+                        for segment, _, encode, args in jobs
+                    ),
+                    threads,
+                )
                 stack.callback(done.close)
             else:
-                # elsewhere (a cluster's workers): each task writes its object's
+                # elsewhere (a cluster's workers): each object's task writes its
                 # fragments into the part folder itself when it sees it, and only
-                # the manifest comes back (see write_object)
+                # the manifest comes back (see write_object); a row's fragments come
+                # back, to be put in the object's order here
                 done = map_objects(
                     write_object,
-                    ((where, str(folder), *args) for where, *args in placed(arguments())),
+                    (
+                        (
+                            what,
+                            (
+                                str(where / str(segment)) if encode is encode_object else None,
+                                str(folder),
+                                encode,
+                                *args,
+                            ),
+                        )  # fmt: skip
+                        for segment, what, encode, args in jobs
+                    ),
                 )
                 if hasattr(done, "close"):  # stops the work left when this fails
                     stack.callback(done.close)
-            for segment, (manifest, data) in zip(meshes, done, strict=True):
+            for first in done:
+                # the plan of the object whose first result this is (queued with its
+                # tasks, which were taken before their results came)
+                segment, plan = plans.popleft()
+                if plan is None:
+                    manifest, data = first
+                else:
+                    shape, grid_origin, rows = plan
+                    more = [next(done) for _ in range(rows - 1)]
+                    manifest, data = _joined_rows([first, *more], shape, grid_origin)
                 written = isinstance(data, int)  # its size: the task wrote the data
                 if spec is None:
-                    (work / "mesh" / f"{int(segment)}.index").write_bytes(manifest)
+                    (work / "mesh" / f"{segment}.index").write_bytes(manifest)
                     if not written:
-                        (work / "mesh" / f"{int(segment)}").write_bytes(data)
+                        (work / "mesh" / f"{segment}").write_bytes(data)
                 else:
-                    spill.add(int(segment), data, manifest)
+                    spill.add(segment, data, manifest)
             if spill is not None:
                 _write_shards(work / "mesh", spill, spec)
     return folder
@@ -541,39 +552,106 @@ def encode_object(
     return _object(levels, bits, _dracopy(), chunk)
 
 
-def encode_parts(
-    parts: MeshParts, origin: np.ndarray, inverse: np.ndarray, bits: int, chunk: float
-) -> tuple[bytes, bytes]:
-    """:func:`encode_object` of one level cut into ``chunk``-wide fragments, from
-    the object's parts: each z-row of nodes from the triangles that reach it
-    (:meth:`~isoconvert.mesh.MeshParts.reaching`), so that the object's whole mesh
-    is never built. The same bytes as :func:`encode_object` of the whole mesh, as
-    :func:`_cut_level` makes each row from the triangles reaching it alone.
-
-    Parameters
-    ----------
-    parts : MeshParts
-        The object, in the world frame.
-    origin, inverse, bits, chunk
-        As :func:`encode_object`.
-    """
+def _tasks(
+    meshes: Mapping[int, Mesh],
+    parts: Callable[[int], MeshParts] | None,
+    plans: deque,
+    origin: np.ndarray,
+    inverse: np.ndarray,
+    lods: int,
+    bits: int,
+    chunk: float | None,
+    decimate: Callable[[Mesh, float], Mesh] | None,
+) -> Iterator[tuple[int, str, Callable, tuple]]:
+    """Each object's tasks, ``(segment, what, encode, args)``, an object at a time,
+    its plan put in ``plans`` before them: ``(segment, None)`` for one
+    :func:`encode_object` task, or, for a layer of one level cut into fragments
+    from the object's parts, ``(segment, (shape, grid origin, rows))`` for one
+    :func:`encode_row` task per z-row of nodes its box reaches, each made of the
+    triangles that reach the row, so that no object's whole mesh is built (the
+    same bytes, as :func:`_cut_level` makes each row from those triangles alone).
+    An object held by one node is its whole mesh."""
+    by_rows = parts is not None and lods == 1 and chunk is not None
 
     def to_index(world: np.ndarray) -> np.ndarray:
         return _index_of(world, origin, inverse)
 
-    lo, hi = parts.extent(to_index)
-    grid_origin, shape, cut = _frame(lo, hi, chunk)
-    if not cut:  # one fragment: the whole mesh, which is small
-        whole = parts.whole()
-        return encode_object(whole.vertices, whole.cells, origin, inverse, 1, bits, chunk, None)
-    frame = _Octree(grid_origin, shape, shape, float(2**bits - 1), lo, hi)
-    level: dict = {}
-    for row in _rows(frame):
-        part = parts.reaching(to_index, *_row_span(frame, row))
-        if part.n_cells:
-            index = to_index(part.vertices)
-            level.update(_cut_level(index, np.asarray(part.cells, np.int64), frame, [row]))
-    return _assemble([level], shape, grid_origin, bits, _dracopy())
+    for key in meshes:  # a mapping that builds each mesh when asked for is asked once
+        segment = int(key)
+        if by_rows:
+            pieces = parts(segment)
+            lo, hi = pieces.extent(to_index)
+            grid_origin, shape, cut = _frame(lo, hi, chunk)
+            if cut:
+                frame = _Octree(grid_origin, shape, shape, float(2**bits - 1), lo, hi)
+                rows = _rows(frame)
+                plans.append((segment, (shape, grid_origin, len(rows))))
+                for row in rows:
+                    part = pieces.reaching(to_index, *_row_span(frame, row))
+                    args = (part.vertices, part.cells, origin, inverse, frame, row, bits)
+                    yield segment, f"object {segment}, z-row {row} of fragments", encode_row, args
+                continue
+            mesh = pieces.whole()
+        else:
+            mesh = meshes[key]
+        _check_mesh(segment, mesh)
+        plans.append((segment, None))
+        args = (mesh.vertices, mesh.cells, origin, inverse, lods, bits, chunk, decimate)
+        yield segment, f"object {segment}", encode_object, args
+
+
+def encode_row(
+    vertices: np.ndarray,
+    cells: np.ndarray,
+    origin: np.ndarray,
+    inverse: np.ndarray,
+    frame: _Octree,
+    row: int,
+    bits: int,
+) -> tuple[tuple[list[tuple[int, int, int]], list[int]], bytes]:
+    """One z-row of nodes of an object's single level, cut (:func:`_cut_level`) and
+    Draco-encoded: a task of arrays and scalars, which a cluster's worker can run.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+        World positions of the triangles that reach the row (and its snapping
+        distance), in the object's order, over its vertices in theirs.
+    cells : (C, 3) int64
+    origin, inverse
+        As :func:`encode_object`.
+    frame : _Octree
+        The object's level.
+    row : int
+    bits : int
+
+    Returns
+    -------
+    table : (positions, sizes)
+        The row's nodes in Z-curve order and their fragments' sizes.
+    data : bytes
+        The fragments, in that order.
+    """
+    cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
+    level = _cut_level(_index_of(vertices, origin, inverse), cells, frame, [row])
+    positions, encoded = _encoded(level, bits, _dracopy())
+    return (positions, [len(e) for e in encoded]), b"".join(encoded)
+
+
+def _joined_rows(
+    rows: Iterable[tuple[tuple[list, list[int]], bytes]], shape: np.ndarray, grid_origin: np.ndarray
+) -> tuple[bytes, bytes]:
+    """An object's manifest and fragment data from its rows' (:func:`encode_row`),
+    the fragments put in Z-curve order over the whole object."""
+    fragments: dict[tuple[int, int, int], bytes] = {}
+    for (positions, sizes), data in rows:
+        ends = np.cumsum(sizes, dtype=np.int64)
+        for position, start, end in zip(positions, ends - sizes, ends, strict=True):
+            fragments[tuple(position)] = data[start:end]
+    positions = sorted(fragments, key=_morton)
+    sizes = [len(fragments[p]) for p in positions]
+    data = b"".join(fragments[p] for p in positions)
+    return _manifest(shape, grid_origin, [(positions, sizes)]), data
 
 
 def _index_of(world: np.ndarray, origin: np.ndarray, inverse: np.ndarray) -> np.ndarray:
@@ -596,32 +674,39 @@ def _index_of(world: np.ndarray, origin: np.ndarray, inverse: np.ndarray) -> np.
     return d[:, 0:1] * inverse[:, 0] + d[:, 1:2] * inverse[:, 1] + d[:, 2:3] * inverse[:, 2]
 
 
-def write_object(target: str, layer: str, *args) -> tuple[bytes, bytes | int]:
-    """:func:`encode_object` as a cluster's task: the fragment data is written by the
-    task itself to ``target`` (in the layer's part folder) when it sees that folder
-    (a file system shared with the client, as a cluster's output usually is), and
-    only the manifest and the data's size come back; a task that does not see it
-    sends the data back instead, for the client to write.
+def write_object(
+    target: str | None, layer: str, encode: Callable[..., tuple], *args
+) -> tuple[bytes | tuple, bytes | int]:
+    """A layer's task on a cluster: ``encode(*args)``, :func:`encode_object` or
+    :func:`encode_row`. An object's fragment data is written by the task itself
+    to ``target`` (in the layer's part folder) when it sees that folder (a file
+    system shared with the client, as a cluster's output usually is), and only
+    the manifest and the data's size come back; a task that does not see it sends
+    the data back instead, for the client to write. A row's (``target`` None)
+    always comes back: the client puts the rows' fragments in the object's order.
 
     Parameters
     ----------
-    target : str
-        The file of the object's fragment data.
+    target : str or None
+        The file of the object's fragment data; None: sent back.
     layer : str
         The layer's folder, named in errors.
+    encode : callable
     *args
-        :func:`encode_object`'s.
+        ``encode``'s.
 
     Returns
     -------
-    manifest : bytes
+    head : bytes or tuple
+        The manifest (or a row's table of fragments).
     data : bytes or int
         The fragment data, or its size once written to ``target``.
     """
     from ..atomic import DISK_FULL_ERRNOS, disk_full_error
 
-    manifest, data = encode_object(*args)
-    if not Path(target).parent.is_dir():  # the client's part folder is not on this machine
+    manifest, data = encode(*args)
+    # a row, or the client's part folder not on this machine: sent back
+    if target is None or not Path(target).parent.is_dir():
         return manifest, data
     try:
         Path(target).write_bytes(data)
@@ -638,7 +723,7 @@ def write_object(target: str, layer: str, *args) -> tuple[bytes, bytes | int]:
 
 
 def _encode_and_write(target: str, encode: Callable, *args) -> tuple[bytes, int]:
-    """``encode(*args)`` (:func:`encode_object` or :func:`encode_parts`), its
+    """``encode(*args)`` (:func:`encode_object`), its
     fragment data written to ``target``: the manifest and the data's size."""
     manifest, data = encode(*args)
     Path(target).write_bytes(data)
@@ -869,32 +954,46 @@ def _assemble(
 ) -> tuple[bytes, bytes]:
     """The manifest and the Draco-encoded fragment data of an object's levels
     (each a dict of node position to quantized vertices and triangles)."""
-    top = float(2**bits - 1)
     # every node's parent is listed too (empty when the coarser level has no
     # triangles there), as the viewer walks the octree down from the top
     for k in range(len(nodes) - 1):
         for x, y, z in list(nodes[k]):
             nodes[k + 1].setdefault((x // 2, y // 2, z // 2), None)
+    levels, data = [], []
+    for level in nodes:
+        positions, encoded = _encoded(level, bits, draco)
+        levels.append((positions, [len(e) for e in encoded]))
+        data.extend(encoded)
+    return _manifest(shape, grid_origin, levels), b"".join(data)
+
+
+def _encoded(level: dict, bits: int, draco) -> tuple[list[tuple[int, int, int]], list[bytes]]:
+    """A level's (or a row's) nodes in Z-curve order and their Draco fragments
+    (empty for a node listed only as a parent)."""
+    top = float(2**bits - 1)
+    positions = sorted(level, key=_morton)
+    fragments = [level[p] for p in positions]
+    return positions, [b"" if f is None else _encode(draco, *f, bits, top) for f in fragments]
+
+
+def _manifest(
+    shape: np.ndarray, grid_origin: np.ndarray, levels: Sequence[tuple[Sequence, Sequence[int]]]
+) -> bytes:
+    """An object's manifest: its octree's finest nodes' ``shape`` and grid origin,
+    and for each level its nodes' positions, in Z-curve order, with the sizes of
+    their fragments."""
     parts = [
         shape.astype("<f4").tobytes(),
         grid_origin.astype("<f4").tobytes(),
-        np.uint32(len(nodes)).astype("<u4").tobytes(),
-        np.array([2.0**k for k in range(len(nodes))], "<f4").tobytes(),  # lod_scales
-        np.zeros((len(nodes), 3), "<f4").tobytes(),  # vertex_offsets
-        np.array([len(level) for level in nodes], "<u4").tobytes(),
+        np.uint32(len(levels)).astype("<u4").tobytes(),
+        np.array([2.0**k for k in range(len(levels))], "<f4").tobytes(),  # lod_scales
+        np.zeros((len(levels), 3), "<f4").tobytes(),  # vertex_offsets
+        np.array([len(positions) for positions, _ in levels], "<u4").tobytes(),
     ]
-    data = []
-    for level in nodes:
-        positions = sorted(level, key=_morton)
-        sizes = []
-        for position in positions:
-            fragment = level[position]
-            encoded = b"" if fragment is None else _encode(draco, *fragment, bits, top)
-            sizes.append(len(encoded))
-            data.append(encoded)
+    for positions, sizes in levels:
         parts.append(np.array(positions, "<u4").reshape(-1, 3).T.copy().tobytes())
         parts.append(np.array(sizes, "<u4").tobytes())
-    return b"".join(parts), b"".join(data)
+    return b"".join(parts)
 
 
 @dataclass(frozen=True)
