@@ -314,7 +314,7 @@ class LabelParts:
     """
 
     #: Quads whose corners' positions are converted at once.
-    PIECE = 1 << 18
+    PIECE = 1 << 16
 
     def __init__(self, owner: LabelMeshes, label: int) -> None:
         net = owner._net
