@@ -38,6 +38,10 @@ the peer), beside the best and median times. The pipelines:
   256M`` and whole, beside the same surface as a PLY within that budget (the bound the
   other outputs keep) and the zmesh + cloud-volume script (one legacy fragment):
   the peak of cutting one large object.
+- ``layer-cluster``: the same object's layer with ``--scheduler``, on a Dask cluster this
+  benchmark starts (``dask scheduler`` and ``dask worker --nworkers 2 --nthreads 1`` on
+  127.0.0.1), beside the same layer made in memory; the workers' peak resident size is
+  printed after (``getrusage`` on each worker), as the client's is by ``wait4``.
 - ``normals``: a 384^3 float32 gyroid (raw) to binary PLY with and without ``--normals``.
   Target 1.3x.
 - ``ct-bound``: the chest CT (DICOM series, 512x512x64, level 300.5 HU) decimated with
@@ -406,6 +410,76 @@ def one_object_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]
     return commands, [(commands[0].name, commands[2].name, None), (commands[1].name, peer, None)]
 
 
+def cluster_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list, object]:
+    """The one object's layer made by a local Dask cluster's two workers."""
+    volume = tmp / "one_object.npy"
+    if not volume.exists():
+        np.save(volume, np.ascontiguousarray(one_object_volume().T))
+    address = start_cluster(tmp)
+    layer = [exe, "convert", str(volume), "--labels", "-f", "-q", "--format", "precomputed"]
+    layer += ["--lods", "1", "--fragment-size", "64"]
+    commands = [
+        Command(
+            "isoconvert fragments 64, --scheduler (2 workers)",
+            layer + ["--scheduler", address, "-o", str(tmp / "one_c")],
+        ),  # fmt: skip
+        Command("isoconvert fragments 64, in memory", layer + ["-o", str(tmp / "one_m")]),
+    ]
+
+    def workers_peak() -> None:
+        from distributed import Client
+
+        with Client(address, timeout=30) as client:
+            peaks = client.run(_peak_kib)
+        text = ", ".join(f"{kib / 1024:.0f} MB" for kib in peaks.values())
+        print(f"the workers' peak resident sizes: {text}")
+
+    return commands, [(commands[0].name, commands[1].name, None)], workers_peak
+
+
+def _peak_kib() -> int:
+    """This process's peak resident size (KiB): run on each worker."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+
+
+def start_cluster(tmp: Path) -> str:
+    """A scheduler and two one-thread workers on 127.0.0.1, stopped at exit."""
+    import atexit
+    import socket
+    import subprocess
+
+    from distributed import Client
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    dask = [sys.executable, "-m", "dask"]
+    quiet = {"cwd": tmp, "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    processes = [
+        subprocess.Popen(
+            [*dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+            **quiet,
+        ),
+        subprocess.Popen(
+            [*dask, "worker", address, "--nworkers", "2", "--nthreads", "1", "--no-dashboard"],
+            **quiet,
+        ),
+    ]
+
+    def stop() -> None:
+        for process in reversed(processes):
+            process.terminate()
+            process.wait(30)
+
+    atexit.register(stop)
+    with Client(address, timeout=60) as client:
+        client.wait_for_workers(2, timeout=60)
+    return address
+
+
 #: --max-memory of the large layer: half the 512 MB volume.
 LARGE_BUDGET = "256M"
 
@@ -492,6 +566,7 @@ PIPELINES = {
     ),
     "layer-many": ("15,625 small objects (200^3 uint32): a layer", many_layer_pipeline),
     "layer-one": ("one object, 1.5 M triangles (448^3 uint8): a layer", one_object_layer_pipeline),
+    "layer-cluster": ("the same object's layer on a local Dask cluster", cluster_layer_pipeline),
     "normals": ("gyroid 384^3 float32 -> PLY, with and without --normals", normals_pipeline),
     "ct-print": ("chest CT -> printable STL", ct_print_pipeline),
 }
@@ -517,9 +592,11 @@ def main(argv: list[str] | None = None) -> None:
                 ct_bound(tmp, exe, rounds)
                 continue
             title, build = PIPELINES[key]
-            commands, pairs = build(tmp, exe)
+            commands, pairs, *after = build(tmp, exe)
             time_rounds(commands, rounds)
             print_pipeline(title, commands, pairs)
+            for report in after:  # what the commands' own peaks leave out
+                report()
     print(f"\nload average at the end {os.getloadavg()[0]:.2f}")
 
 
