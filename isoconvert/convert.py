@@ -395,7 +395,7 @@ def _convert_levels_to_layer(
         unit=volume.unit,
         data_type=data_type_for(len(levels)),
         lods=opts.layer_lods,
-        decimate=bounded_collapse,
+        collapse=bounded_collapse,
         chunk=opts.fragment_size,
         sharded=opts.sharded,
         legacy=opts.legacy_mesh,
@@ -485,11 +485,12 @@ def _object_task(function, *args):
         return TaskFailure.of(exc)
 
 
-def bounded_collapse(mesh: Mesh, bound: float) -> Mesh:
-    """A precomputed layer's coarser level: the bounded collapse to within ``bound``."""
-    from .post.decimate import decimate
+def bounded_collapse(mesh: Mesh, bound: float, locked: np.ndarray | None = None) -> np.ndarray:
+    """A precomputed layer's coarser level: the bounded collapse to within ``bound``,
+    its triangles over ``mesh``'s vertices, ``locked`` ones kept."""
+    from .post.decimate import collapse
 
-    return decimate(mesh, max_error=bound)
+    return collapse(mesh, max_error=bound, locked=locked)[0]
 
 
 def refuse_outputs_read(outputs: Sequence[str | Path], *volumes: Volume | None) -> None:

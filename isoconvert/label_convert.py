@@ -180,7 +180,7 @@ def convert_labels(
             unit=volume.unit,
             data_type=volume_data_type(largest) if opts.with_volume else data_type_for(largest),
             lods=opts.layer_lods,
-            decimate=bounded_collapse,
+            collapse=bounded_collapse,
             chunk=opts.fragment_size,
             sharded=opts.sharded,
             legacy=opts.legacy_mesh,

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -428,6 +428,20 @@ class MeshParts(Protocol):
         """At least every triangle whose ``to_index`` z-range meets ``[low, high]``,
         in the whole mesh's order, over its vertices in theirs (a whole mesh's
         triangles and vertices, some left out)."""
+        ...
+
+    @property
+    def n_cells(self) -> int:
+        """How many triangles the whole mesh has."""
+        ...
+
+    def slabs(
+        self, to_index: Callable[[np.ndarray], np.ndarray], count: int
+    ) -> Iterator[tuple[Mesh, np.ndarray, np.ndarray]]:
+        """The mesh in ``count`` z-slabs (by ``to_index``), each triangle in one:
+        per slab its mesh (in the whole mesh's order, over its vertices in theirs),
+        its vertices' ids ``(V_s,) int64`` (increasing, the same for a vertex in
+        every slab), and ``(V_s,) bool``: which of them other slabs use too."""
         ...
 
     def whole(self) -> Mesh:

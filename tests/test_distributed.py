@@ -712,6 +712,35 @@ def test_one_cut_level_is_encoded_on_the_workers_a_row_of_fragments_per_task(
     assert _layer_files(tmp_path / "there") == _layer_files(tmp_path / "here")
 
 
+def test_large_objects_coarser_levels_are_the_same_in_memory_in_slabs_and_on_the_cluster(
+    address, monkeypatch, tmp_path
+):
+    """Objects above LARGE_OBJECT triangles get their coarser levels from slabs of
+    their surface (the others whole): the same layer in memory, read in slabs,
+    and on the cluster (whose workers make level 0 a row at a time)."""
+    pytest.importorskip("DracoPy")
+    pytest.importorskip("meshoptimizer")
+    from isoconvert.label_convert import convert_labels
+    from isoconvert.writers import precomputed
+
+    monkeypatch.setattr(precomputed, "LARGE_OBJECT", 1000)
+    monkeypatch.setattr(precomputed, "SLAB_TRIANGLES", 600)
+    slabbed = []
+    real = precomputed._coarse_levels
+    monkeypatch.setattr(
+        precomputed, "_coarse_levels", lambda p, *a: slabbed.append(p.n_cells) or real(p, *a)
+    )
+    np.save(tmp_path / "atlas.npy", _atlas())
+    options = {"format": "precomputed", "lods": 2, "fragment_size": 4.0}
+    runs = {"memory": Blocks(), "slabs": Blocks(size=7), "cluster": Blocks(scheduler=address)}
+    for name, blocks in runs.items():
+        convert_labels(tmp_path / "atlas.npy", tmp_path / name, blocks=blocks, **options)
+    # the 6 labels: 340 to 3,788 triangles, 4 of them above 1,000
+    assert len(slabbed) == 3 * 4 and min(slabbed) > 1000
+    assert _layer_files(tmp_path / "slabs") == _layer_files(tmp_path / "memory")
+    assert _layer_files(tmp_path / "cluster") == _layer_files(tmp_path / "memory")
+
+
 def test_a_full_disk_while_the_workers_write_fragments_is_one_line(address, tmp_path):
     """A layer of 1.9 MB of fragments onto a 1 MiB tmpfs, its objects written by the
     workers: the one-line disk-full error naming the layer, and the tmpfs empty."""

@@ -20,7 +20,7 @@ from scipy.spatial import cKDTree
 from isoconvert.errors import IsoconvertError, OutputError
 from isoconvert.extract.labels import label_surfaces
 from isoconvert.mesh import Mesh
-from isoconvert.post.decimate import decimate
+from isoconvert.post.decimate import collapse
 from isoconvert.volume import Volume
 from isoconvert.writers.precomputed import write_precomputed
 
@@ -68,13 +68,13 @@ def layer(tmp_path_factory, labelled):
     folder = tmp_path_factory.mktemp("layers") / "atlas ñ"
     grid = next(iter(result.meshes.values())).info["grid"]
     write_precomputed(
-        folder, result.meshes, grid, unit="µm", data_type="uint16", lods=3, decimate=_bounded
+        folder, result.meshes, grid, unit="µm", data_type="uint16", lods=3, collapse=_bounded
     )
     return folder
 
 
-def _bounded(mesh, bound):
-    return decimate(mesh, max_error=bound)
+def _bounded(mesh, bound, locked=None):
+    return collapse(mesh, max_error=bound, locked=locked)[0]
 
 
 def _cloud(folder):
@@ -541,7 +541,7 @@ def test_fragments_are_an_octree_whose_seams_stay_closed(tmp_path, labelled, siz
     volume, result = labelled
     grid = next(iter(result.meshes.values())).info["grid"]
     layer = tmp_path / "layer"
-    write_precomputed(layer, result.meshes, grid, unit="µm", lods=3, decimate=_bounded, chunk=size)
+    write_precomputed(layer, result.meshes, grid, unit="µm", lods=3, collapse=_bounded, chunk=size)
     cv = _cloud(layer)
     for label, mesh in result.meshes.items():
         chunk, _, n, _, _, positions, sizes = _manifest(layer / "mesh" / f"{label}.index")
@@ -565,6 +565,73 @@ def test_fragments_are_an_octree_whose_seams_stay_closed(tmp_path, labelled, siz
                 _, there, _ = trimesh.proximity.closest_point(original, union.vertices)
                 _, back_there, _ = trimesh.proximity.closest_point(union, original.vertices)
                 assert there.max() <= step and back_there.max() <= step
+
+
+def test_large_objects_coarser_levels_are_collapsed_in_slabs_within_their_bound(
+    tmp_path, labelled, monkeypatch
+):
+    """Objects above LARGE_OBJECT triangles, cut into fragments from their parts:
+    no label's whole surface is built nor collapsed (each collapse gets one slab,
+    or the slabs' union, fewer triangles than the label's); cloud-volume reads
+    each coarser level closed, with fewer triangles than the level above, and
+    within its bound of level 0 both ways (plus a quantization step)."""
+    from isoconvert.writers import precomputed
+
+    volume, _ = labelled
+    monkeypatch.setattr(precomputed, "LARGE_OBJECT", 500)
+    monkeypatch.setattr(precomputed, "SLAB_TRIANGLES", 400)
+    parted = label_surfaces(volume, smoothing=16)
+    whole = label_surfaces(volume, smoothing=16)
+    sizes = {label: whole[label].n_cells for label in whole.labels}
+    assert min(sizes.values()) > 1000  # each in three slabs or more
+    built, inputs, current = [], {}, []
+    real = type(parted)._build
+    monkeypatch.setattr(
+        type(parted), "_build", lambda self, label: built.append(label) or real(self, label)
+    )
+
+    def parts(label):
+        current.append(label)
+        return parted.parts(label)
+
+    def recorded(mesh, bound, locked=None):
+        inputs.setdefault(current[-1], []).append((mesh.n_cells, bound, locked is not None))
+        return _bounded(mesh, bound, locked)
+
+    layer = tmp_path / "layer"
+    write_precomputed(layer, parted.meshes, parted.grid, unit="µm", lods=3, collapse=recorded,
+                      chunk=8.0, parts=parts, object_threads=1)  # fmt: skip
+    assert built == []
+    for label, count in sizes.items():
+        slabs = [(n, bound) for n, bound, locked in inputs[label] if locked]
+        unions = [(n, bound) for n, bound, locked in inputs[label] if not locked]
+        # every triangle in one slab; one union per coarser level, its triangles fewer
+        assert len(slabs) >= 3 and sum(n for n, _ in slabs) == count
+        assert max(n for n, _ in slabs) < count
+        assert len(unions) == 2 and len({n for n, _ in unions}) == 1 and unions[0][0] < count
+        # the bounds add up to each level's: the slabs' and then the union's
+        (slab_bound,) = {bound for _, bound in slabs}
+        assert [slab_bound + bound for _, bound in unions] == [1.0, 2.0]
+    cv = _cloud(layer)
+    for label, mesh in whole.meshes.items():
+        original = trimesh.Trimesh(_to_index(volume, np.asarray(mesh.vertices)), mesh.cells)
+        previous = None
+        for lod in range(3):
+            back = cv.mesh.get(int(label), lod=lod)[int(label)]
+            index = _to_index(volume, np.asarray(back.vertices, np.float64) / NM_PER_UM)
+            union = trimesh.Trimesh(index, back.faces, process=True)  # fragments joined
+            assert union.is_watertight, (label, lod)
+            if previous is not None:
+                assert len(union.faces) < previous
+            previous = len(union.faces)
+            bound = (2.0 ** (lod - 1) if lod else 0.0) + np.linalg.norm(
+                8.0 * 2.0**lod / (2**16 - 1) * np.ones(3)
+            ) + 1e-5  # fmt: skip
+            points = np.vstack([union.vertices, union.sample(3000, seed=1)])
+            _, there, _ = trimesh.proximity.closest_point(original, points)
+            points = np.vstack([original.vertices, original.sample(3000, seed=2)])
+            _, back_there, _ = trimesh.proximity.closest_point(union, points)
+            assert there.max() <= bound and back_there.max() <= bound, (label, lod)
 
 
 def test_triangles_crossing_several_rows_of_fragments_are_cut_alike_in_each(tmp_path):
@@ -627,7 +694,7 @@ def test_a_sharded_layer_holds_the_same_objects(tmp_path):
     grid = next(iter(result.meshes.values())).info["grid"]
     for sharded in (False, True):
         write_precomputed(tmp_path / f"s{sharded}", result.meshes, grid, unit="µm", lods=2,
-                          decimate=_bounded, chunk=8.0, sharded=sharded)  # fmt: skip
+                          collapse=_bounded, chunk=8.0, sharded=sharded)  # fmt: skip
     info = json.loads((tmp_path / "sTrue" / "mesh" / "info").read_text())
     jsonschema.validate(info, MESH_SCHEMA)
     assert info["sharding"]["minishard_bits"] > 0
@@ -713,7 +780,7 @@ def test_the_layer_does_not_depend_on_the_thread_count(tmp_path, labelled, monke
     for threads in ("1", "2"):
         monkeypatch.setenv("ISOCONVERT_THREADS", threads)
         write_precomputed(tmp_path / threads, result.meshes, grid, unit="µm", lods=lods,
-                          decimate=_bounded, chunk=8.0, object_threads=int(threads))  # fmt: skip
+                          collapse=_bounded, chunk=8.0, object_threads=int(threads))  # fmt: skip
     one = sorted(p.relative_to(tmp_path / "1") for p in (tmp_path / "1").rglob("*"))
     two = sorted(p.relative_to(tmp_path / "2") for p in (tmp_path / "2").rglob("*"))
     assert one == two

@@ -86,7 +86,7 @@ from __future__ import annotations
 import copy
 import functools
 import weakref
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -359,6 +359,47 @@ class LabelParts:
         release(net.corners)
         release(net.vertices)
         return Mesh(verts, local)
+
+    @property
+    def n_cells(self) -> int:
+        return 2 * len(self._quads)
+
+    def slabs(
+        self, to_index: Callable[[np.ndarray], np.ndarray], count: int
+    ) -> Iterator[tuple[Mesh, np.ndarray, np.ndarray]]:
+        # a quad's slab by its lowest corner, in ``count`` equal z-ranges
+        if self._low is None:
+            self.extent(to_index)
+        net = self._owner._net
+        low, span = self._low.min(), float(np.ptp(self._low))
+        slab = np.zeros(len(self._quads), dtype=np.int64)
+        if span > 0:
+            slab = np.minimum(((self._low - low) / span * count).astype(np.int64), count - 1)
+        # each slab's quads, in their order; then the vertices of more than one slab's
+        order = np.argsort(slab, kind="stable")
+        ends = np.searchsorted(slab[order], np.arange(count + 1))
+        corners = net.corners[self._quads]
+        base = int(corners.min()) if len(corners) else 0
+        seen = np.zeros(int(corners.max()) - base + 1 if len(corners) else 0, dtype=bool)
+        shared = np.zeros_like(seen)
+        for n in range(count):
+            ids = np.unique(corners[order[ends[n] : ends[n + 1]]]) - base
+            shared[ids] |= seen[ids]
+            seen[ids] = True
+        del corners, seen
+        release(net.corners)
+        for n in range(count):
+            taken = order[ends[n] : ends[n + 1]]
+            if not len(taken):
+                continue
+            inside = int(np.searchsorted(taken, self._inside))
+            _, used, local, verts = _native.label_mesh(
+                net.corners, net.cut, net.vertices, self._quads[taken], inside
+            )
+            release(net.corners)
+            release(net.vertices)
+            used = np.asarray(used, dtype=np.int64)
+            yield Mesh(verts, local), used, shared[used - base]
 
     def whole(self) -> Mesh:
         return self._owner.meshes[self._label]

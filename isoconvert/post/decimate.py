@@ -150,6 +150,39 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
     a "fin") is one of the problems: removing it would close a handle (change the
     genus) or open a hole.
     """
+    out, report = collapse(mesh, reduction, max_error)
+    used = np.zeros(len(mesh.vertices), dtype=bool)
+    used[out.reshape(-1)] = True
+    new_index = np.cumsum(used) - 1  # compact, keeping the input's vertex order
+    info = dict(mesh.info)
+    info["decimation"] = report
+    return Mesh(np.asarray(mesh.vertices, dtype=np.float64)[used], new_index[out], None, info)
+
+
+def collapse(
+    mesh: Mesh,
+    reduction: float | None = None,
+    max_error: float | None = None,
+    locked: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict]:
+    """:func:`decimate`'s collapse, its triangles over the input's vertices.
+
+    Parameters
+    ----------
+    mesh, reduction, max_error
+        As :func:`decimate`.
+    locked : (V,) bool or None
+        Vertices that stay where they are, besides those :func:`decimate` locks
+        (a piece of a larger mesh: the vertices it shares with the rest and their
+        neighbours, so that no collapse on either side joins two shared vertices).
+
+    Returns
+    -------
+    cells : (C', 3) int64
+        The result's triangles, indices into ``mesh.vertices``.
+    report : dict
+        :func:`decimate`'s ``info["decimation"]``.
+    """
     if not mesh.is_triangles:
         raise IsoconvertError("decimate needs a triangle mesh ((C, 3) cells), not segments")
     if reduction is None and max_error is None:
@@ -182,7 +215,7 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
     input_grid = TriangleGrid(vertices, cells, radius) if max_error is not None else None
     certified = Certified()  # the result's triangles certified onto the input so far
     # what is wrong with the input stays as it is: collapses never touch it
-    locked = guard.input_problems.copy()
+    locked = guard.input_problems | (False if locked is None else np.asarray(locked, dtype=bool))
 
     attempts = 0
     deviation = spread = surface = None
@@ -247,11 +280,7 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
         # nothing met the bounds: the input does
         out, deviation, spread, surface = cells, 0.0, 0.0, 0.0
 
-    used = np.zeros(len(vertices), dtype=bool)
-    used[out.reshape(-1)] = True
-    new_index = np.cumsum(used) - 1  # compact, keeping the input's vertex order
-    info = dict(mesh.info)
-    info["decimation"] = {
+    report = {
         "library": "meshoptimizer",
         "reduction": None if reduction is None else float(reduction),
         "max_error": None if max_error is None else float(max_error),
@@ -266,7 +295,7 @@ def decimate(mesh: Mesh, reduction: float | None = None, max_error: float | None
         "attempts": attempts,
         "locked_vertices": int(locked.sum()),
     }
-    return Mesh(vertices[used], new_index[out], None, info)
+    return out, report
 
 
 def _simplify_with_lock(mo):

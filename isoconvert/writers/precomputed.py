@@ -22,7 +22,7 @@ files):
 
 Levels of detail: level 0 is the mesh as extracted; level k (k >= 1) is it
 decimated, by the function the caller passes (the jobs pass isoconvert's bounded
-collapse, :func:`isoconvert.post.decimate.decimate`), to within ``2**(k - 1)``
+collapse, :func:`isoconvert.post.decimate.collapse`), to within ``2**(k - 1)``
 index units both ways. Each level is one fragment whose
 octree node starts at the object's bounding box: its node at level k is ``2**k``
 boxes wide, so the object lies in the node's first octant and no triangle
@@ -63,6 +63,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import functools
 import json
 import shutil
 from collections import deque
@@ -86,6 +87,11 @@ QUANTIZATION_BITS = (10, 16)
 
 #: Label types a precomputed segmentation may hold.
 _DATA_TYPES = ("uint8", "uint16", "uint32", "uint64")
+
+#: ``collapse(mesh, bound, locked)``: the triangles of ``mesh`` (index coordinates)
+#: collapsed to within ``bound`` of it both ways, over its vertices, ``locked``
+#: ((V,) bool or None) kept where they are (:func:`isoconvert.post.decimate.collapse`).
+Collapse = Callable[[Mesh, float, np.ndarray | None], np.ndarray]
 
 #: ``map_objects(function, tasks)``: ``function(*args)`` for each ``(what, args)`` of
 #: ``tasks`` (``what`` names the task in errors), the results in order.
@@ -247,7 +253,7 @@ def write_precomputed(
     unit: str | None = None,
     data_type: str = "uint64",
     lods: int = 1,
-    decimate: Callable[[Mesh, float], Mesh] | None = None,
+    collapse: Collapse | None = None,
     bits: int = 16,
     chunk: float | None = None,
     sharded: bool = False,
@@ -278,11 +284,11 @@ def write_precomputed(
         The labels' type, one of uint8, uint16, uint32, uint64.
     lods : int
         Levels of detail, 1 or more.
-    decimate : callable or None
-        ``decimate(mesh, bound)``: the mesh (in index coordinates) with fewer
-        triangles, within ``bound`` of it both ways (the post-processing layer's
-        bounded collapse, :func:`isoconvert.post.decimate.decimate` with
-        ``max_error``); needed for more than one level.
+    collapse : callable or None
+        ``collapse(mesh, bound, locked)``, the bounded collapse (:data:`Collapse`);
+        needed for more than one level. An object of more than
+        :data:`LARGE_OBJECT` triangles cut into fragments from its ``parts`` is
+        collapsed in slabs (:func:`_coarse_levels`), any other whole.
     bits : int
         Vertex quantization bits, 10 or 16.
     chunk : float or None
@@ -339,8 +345,8 @@ def write_precomputed(
         raise IsoconvertError(f"precomputed: quantization bits must be 10 or 16, got {bits}")
     _check_lods(lods)
     _check_chunk(chunk)
-    if lods > 1 and decimate is None:
-        raise IsoconvertError("precomputed: levels of detail above 0 need a decimate function")
+    if lods > 1 and collapse is None:
+        raise IsoconvertError("precomputed: levels of detail above 0 need a collapse function")
     _check_legacy(legacy, lods, chunk, sharded)
     if data_type not in _DATA_TYPES:
         raise IsoconvertError(
@@ -407,7 +413,7 @@ def write_precomputed(
                 spill = stack.enter_context(_ObjectSpill(work / "mesh"))
             where = work / "mesh" if spill is None else spill.fragments
             plans: deque[tuple[int, tuple | None]] = deque()
-            jobs = _tasks(meshes, parts, plans, origin, inverse, lods, bits, chunk, decimate)
+            jobs = _tasks(meshes, parts, plans, origin, inverse, lods, bits, chunk, collapse)
             if map_objects is None:
                 # objects side by side: the coarser levels' collapses are most of the
                 # work, and their kernels leave the interpreter free (one level:
@@ -455,9 +461,11 @@ def write_precomputed(
                 if plan is None:
                     manifest, data = first
                 else:
-                    shape, grid_origin, rows = plan
-                    more = [next(done) for _ in range(rows - 1)]
-                    manifest, data = _joined_rows([first, *more], shape, grid_origin)
+                    level: dict = {}
+                    for fragments in [first, *(next(done) for _ in range(plan.rows - 1))]:
+                        level.update(fragments)
+                    coarser = plan.coarse() if plan.coarse is not None else []
+                    manifest, data = _assemble([level, *coarser], plan.shape, plan.grid_origin)
                 written = isinstance(data, int)  # its size: the task wrote the data
                 if spec is None:
                     (work / "mesh" / f"{segment}.index").write_bytes(manifest)
@@ -530,10 +538,10 @@ def encode_object(
     lods: int,
     bits: int,
     chunk: float | None,
-    decimate: Callable[[Mesh, float], Mesh] | None,
+    collapse: Collapse | None,
 ) -> tuple[bytes, bytes]:
     """One object's manifest and fragment data: its levels of detail (the coarser
-    ones by ``decimate``), cut and Draco-encoded (:func:`_object`). A module-level
+    ones by ``collapse``), cut and Draco-encoded (:func:`_object`). A module-level
     function of arrays and scalars, so that a cluster's worker can run it.
 
     Parameters
@@ -544,12 +552,30 @@ def encode_object(
     origin : (3,) float64
     inverse : (3, 3) float64
         The grid's origin and the inverse of its affine: index = inverse @ (world - origin).
-    lods, bits, chunk, decimate
+    lods, bits, chunk, collapse
         As :func:`write_precomputed`.
     """
     full = Mesh(_index_of(vertices, origin, inverse), np.asarray(cells, dtype=np.int64))
-    levels = [full] + [decimate(full, float(2 ** (k - 1))) for k in range(1, lods)]
+    levels = [full] + [_collapsed(full, float(2 ** (k - 1)), collapse) for k in range(1, lods)]
     return _object(levels, bits, _dracopy(), chunk)
+
+
+#: Triangles of an object above which its coarser levels are collapsed in z-slabs
+#: of about :data:`SLAB_TRIANGLES` each (:func:`_coarse_levels`), not whole: the
+#: bounded collapse holds about 290 bytes a triangle of its input.
+LARGE_OBJECT = 1 << 19
+SLAB_TRIANGLES = 1 << 18
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """An object made a z-row of level-0 nodes at a time: its octree, its rows'
+    count, and, with coarser levels, what makes them (:func:`_coarse_levels`)."""
+
+    shape: np.ndarray
+    grid_origin: np.ndarray
+    rows: int
+    coarse: Callable[[], list[dict]] | None
 
 
 def _tasks(
@@ -561,31 +587,39 @@ def _tasks(
     lods: int,
     bits: int,
     chunk: float | None,
-    decimate: Callable[[Mesh, float], Mesh] | None,
+    collapse: Collapse | None,
 ) -> Iterator[tuple[int, str, Callable, tuple]]:
     """Each object's tasks, ``(segment, what, encode, args)``, an object at a time,
     its plan put in ``plans`` before them: ``(segment, None)`` for one
-    :func:`encode_object` task, or, for a layer of one level cut into fragments
-    from the object's parts, ``(segment, (shape, grid origin, rows))`` for one
-    :func:`encode_row` task per z-row of nodes its box reaches, each made of the
-    triangles that reach the row, so that no object's whole mesh is built (the
-    same bytes, as :func:`_cut_level` makes each row from those triangles alone).
-    An object held by one node is its whole mesh."""
-    by_rows = parts is not None and lods == 1 and chunk is not None
+    :func:`encode_object` task, or, for an object cut into fragments from its
+    parts, ``(segment, _Rows)`` for one :func:`encode_row` task per z-row of
+    level-0 nodes its box reaches, each made of the triangles that reach the row,
+    so that no object's whole mesh is built (the same bytes, as :func:`_cut_level`
+    makes each row from those triangles alone). Such an object's coarser levels
+    are made after its rows, from slabs of it (:func:`_coarse_levels`); an object
+    of at most :data:`LARGE_OBJECT` triangles with coarser levels, or held by one
+    node, is its whole mesh."""
+    top = float(2**bits - 1)
 
     def to_index(world: np.ndarray) -> np.ndarray:
         return _index_of(world, origin, inverse)
 
     for key in meshes:  # a mapping that builds each mesh when asked for is asked once
         segment = int(key)
-        if by_rows:
+        if parts is not None and chunk is not None:
             pieces = parts(segment)
             lo, hi = pieces.extent(to_index)
             grid_origin, shape, cut = _frame(lo, hi, chunk)
-            if cut:
-                frame = _Octree(grid_origin, shape, shape, float(2**bits - 1), lo, hi)
+            if cut and (lods == 1 or pieces.n_cells > LARGE_OBJECT):
+                frame = _level_frame(grid_origin, shape, 0, top, lo, hi)
                 rows = _rows(frame)
-                plans.append((segment, (shape, grid_origin, len(rows))))
+                coarse = None
+                if lods > 1:
+                    coarse = functools.partial(
+                        _coarse_fragments, pieces, to_index, lods, collapse,
+                        (grid_origin, shape, top, lo, hi), bits,
+                    )  # fmt: skip
+                plans.append((segment, _Rows(shape, grid_origin, len(rows), coarse)))
                 for row in rows:
                     part = pieces.reaching(to_index, *_row_span(frame, row))
                     args = (part.vertices, part.cells, origin, inverse, frame, row, bits)
@@ -596,8 +630,64 @@ def _tasks(
             mesh = meshes[key]
         _check_mesh(segment, mesh)
         plans.append((segment, None))
-        args = (mesh.vertices, mesh.cells, origin, inverse, lods, bits, chunk, decimate)
+        args = (mesh.vertices, mesh.cells, origin, inverse, lods, bits, chunk, collapse)
         yield segment, f"object {segment}", encode_object, args
+
+
+def _coarse_fragments(
+    pieces: MeshParts, to_index: Callable, lods: int, collapse: Collapse, octree: tuple, bits: int
+) -> list[dict[tuple[int, int, int], bytes]]:
+    """A large object's coarser levels (:func:`_coarse_levels`), cut and encoded
+    (``octree``: its grid origin, finest nodes' shape, ``top``, and box)."""
+    grid_origin, shape, top, lo, hi = octree
+    draco = _dracopy()
+    return [
+        _encoded(
+            _cut_level(m.vertices, m.cells, _level_frame(grid_origin, shape, k, top, lo, hi)),
+            bits,
+            draco,
+        )  # fmt: skip
+        for k, m in enumerate(_coarse_levels(pieces, to_index, lods, collapse), start=1)
+    ]
+
+
+def _coarse_levels(
+    pieces: MeshParts, to_index: Callable, lods: int, collapse: Collapse
+) -> list[Mesh]:
+    """Levels 1 to ``lods - 1`` of a large object (index coordinates), never
+    collapsing its whole mesh: level 1 is collapsed in z-slabs of about
+    :data:`SLAB_TRIANGLES` triangles each, within half its bound of its slab (the
+    vertices a slab shares with others, and their neighbours, kept, so that the
+    slabs still meet and no two collapses join the same two shared vertices), then
+    the slabs' union whole, within the other half; level k > 1 from level k - 1,
+    within ``2**(k - 2)``. The bounds add: level k lies within ``2**(k - 1)`` of
+    level 0 both ways, as a whole collapse's would."""
+    count = -(-pieces.n_cells // SLAB_TRIANGLES)
+    ids, cells, positions = [], [], []
+    for slab, used, shared in pieces.slabs(to_index, count):
+        local = np.asarray(slab.cells, dtype=np.int64)
+        index = to_index(slab.vertices)
+        near = shared[local].any(axis=1)
+        kept = shared.copy()
+        kept[local[near].reshape(-1)] = True
+        out = collapse(Mesh(index, local), 0.5, kept)
+        still = np.unique(out)  # the slab's vertices the collapse left
+        ids.append(used[still])
+        positions.append(index[still])
+        cells.append(used[out])
+    # the union, over the vertices its triangles use (a shared one, in two slabs,
+    # has one position), in the order of their ids
+    every, first = np.unique(np.concatenate(ids), return_index=True)
+    union = Mesh(np.concatenate(positions)[first], np.searchsorted(every, np.concatenate(cells)))
+    return [_collapsed(union, 2.0 ** (k - 1) - 0.5, collapse) for k in range(1, lods)]
+
+
+def _collapsed(mesh: Mesh, bound: float, collapse: Collapse) -> Mesh:
+    """``mesh`` collapsed within ``bound``, its vertices those still used, in order."""
+    out = collapse(mesh, bound, None)
+    used = np.zeros(len(mesh.vertices), dtype=bool)
+    used[out.reshape(-1)] = True
+    return Mesh(np.asarray(mesh.vertices)[used], (np.cumsum(used) - 1)[out])
 
 
 def encode_row(
@@ -608,8 +698,8 @@ def encode_row(
     frame: _Octree,
     row: int,
     bits: int,
-) -> tuple[tuple[list[tuple[int, int, int]], list[int]], bytes]:
-    """One z-row of nodes of an object's single level, cut (:func:`_cut_level`) and
+) -> dict[tuple[int, int, int], bytes]:
+    """One z-row of nodes of an object's level 0, cut (:func:`_cut_level`) and
     Draco-encoded: a task of arrays and scalars, which a cluster's worker can run.
 
     Parameters
@@ -621,37 +711,18 @@ def encode_row(
     origin, inverse
         As :func:`encode_object`.
     frame : _Octree
-        The object's level.
+        The object's level 0.
     row : int
     bits : int
 
     Returns
     -------
-    table : (positions, sizes)
-        The row's nodes in Z-curve order and their fragments' sizes.
-    data : bytes
-        The fragments, in that order.
+    dict
+        Each node's position and its Draco fragment.
     """
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
     level = _cut_level(_index_of(vertices, origin, inverse), cells, frame, [row])
-    positions, encoded = _encoded(level, bits, _dracopy())
-    return (positions, [len(e) for e in encoded]), b"".join(encoded)
-
-
-def _joined_rows(
-    rows: Iterable[tuple[tuple[list, list[int]], bytes]], shape: np.ndarray, grid_origin: np.ndarray
-) -> tuple[bytes, bytes]:
-    """An object's manifest and fragment data from its rows' (:func:`encode_row`),
-    the fragments put in Z-curve order over the whole object."""
-    fragments: dict[tuple[int, int, int], bytes] = {}
-    for (positions, sizes), data in rows:
-        ends = np.cumsum(sizes, dtype=np.int64)
-        for position, start, end in zip(positions, ends - sizes, ends, strict=True):
-            fragments[tuple(position)] = data[start:end]
-    positions = sorted(fragments, key=_morton)
-    sizes = [len(fragments[p]) for p in positions]
-    data = b"".join(fragments[p] for p in positions)
-    return _manifest(shape, grid_origin, [(positions, sizes)]), data
+    return _encoded(level, bits, _dracopy())
 
 
 def _index_of(world: np.ndarray, origin: np.ndarray, inverse: np.ndarray) -> np.ndarray:
@@ -675,15 +746,15 @@ def _index_of(world: np.ndarray, origin: np.ndarray, inverse: np.ndarray) -> np.
 
 
 def write_object(
-    target: str | None, layer: str, encode: Callable[..., tuple], *args
-) -> tuple[bytes | tuple, bytes | int]:
+    target: str | None, layer: str, encode: Callable, *args
+) -> tuple[bytes, bytes | int] | dict:
     """A layer's task on a cluster: ``encode(*args)``, :func:`encode_object` or
     :func:`encode_row`. An object's fragment data is written by the task itself
     to ``target`` (in the layer's part folder) when it sees that folder (a file
     system shared with the client, as a cluster's output usually is), and only
     the manifest and the data's size come back; a task that does not see it sends
-    the data back instead, for the client to write. A row's (``target`` None)
-    always comes back: the client puts the rows' fragments in the object's order.
+    the data back instead, for the client to write. A row's fragments (``target``
+    None) always come back: the client puts them in the object's order.
 
     Parameters
     ----------
@@ -697,17 +768,17 @@ def write_object(
 
     Returns
     -------
-    head : bytes or tuple
-        The manifest (or a row's table of fragments).
-    data : bytes or int
-        The fragment data, or its size once written to ``target``.
+    tuple or dict
+        An object's manifest and fragment data (bytes, or its size once written
+        to ``target``); a row's fragments by node.
     """
     from ..atomic import DISK_FULL_ERRNOS, disk_full_error
 
-    manifest, data = encode(*args)
+    result = encode(*args)
     # a row, or the client's part folder not on this machine: sent back
     if target is None or not Path(target).parent.is_dir():
-        return manifest, data
+        return result
+    manifest, data = result
     try:
         Path(target).write_bytes(data)
     except OSError as exc:  # the client removes the part folder on an error
@@ -913,13 +984,13 @@ def _object(
     hi = np.max([m.vertices.max(axis=0) for m in levels], axis=0)
     grid_origin, shape, cut = _frame(lo, hi, chunk)
     top = float(2**bits - 1)
-    nodes: list[dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray] | None]] = []
+    nodes = []
     for k, mesh in enumerate(levels):
-        node = shape * 2.0**k
         vertices, cells = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.cells, np.int64)
         if cut:
-            frame = _Octree(grid_origin, node, node / 2.0 if k else node, top, lo, hi)
-            nodes.append(_cut_level(vertices, cells, frame))
+            nodes.append(
+                _cut_level(vertices, cells, _level_frame(grid_origin, shape, k, top, lo, hi))
+            )
             continue
         # the level lies in the first node (its box is the object's): one fragment
         if np.bincount(cells.reshape(-1), minlength=len(vertices)).all():
@@ -928,9 +999,19 @@ def _object(
             used, local = np.arange(len(vertices)), cells
         else:
             used, local = np.unique(cells, return_inverse=True)
+        node = shape * 2.0**k
         q = np.clip(np.rint((vertices[used] - grid_origin) / node * top), 0, top)
         nodes.append({(0, 0, 0): (q.astype(np.uint32), local.reshape(-1, 3).astype(np.uint32))})
-    return _assemble(nodes, shape, grid_origin, bits, draco)
+    return _assemble([_encoded(level, bits, draco) for level in nodes], shape, grid_origin)
+
+
+def _level_frame(
+    grid_origin: np.ndarray, shape: np.ndarray, k: int, top: float, lo: np.ndarray, hi: np.ndarray
+) -> _Octree:
+    """Level ``k``'s nodes, ``2**k`` finest nodes wide, cut at their halves
+    (level 0's at their own planes)."""
+    node = shape * 2.0**k
+    return _Octree(grid_origin, node, node / 2.0 if k else node, top, lo, hi)
 
 
 def _frame(
@@ -950,30 +1031,27 @@ def _frame(
 
 
 def _assemble(
-    nodes: list[dict], shape: np.ndarray, grid_origin: np.ndarray, bits: int, draco
+    levels: list[dict[tuple[int, int, int], bytes]], shape: np.ndarray, grid_origin: np.ndarray
 ) -> tuple[bytes, bytes]:
-    """The manifest and the Draco-encoded fragment data of an object's levels
-    (each a dict of node position to quantized vertices and triangles)."""
+    """The manifest and the fragment data of an object's levels, each a dict of
+    node position to its Draco fragment (:func:`_encoded`)."""
     # every node's parent is listed too (empty when the coarser level has no
     # triangles there), as the viewer walks the octree down from the top
-    for k in range(len(nodes) - 1):
-        for x, y, z in list(nodes[k]):
-            nodes[k + 1].setdefault((x // 2, y // 2, z // 2), None)
-    levels, data = [], []
-    for level in nodes:
-        positions, encoded = _encoded(level, bits, draco)
-        levels.append((positions, [len(e) for e in encoded]))
-        data.extend(encoded)
-    return _manifest(shape, grid_origin, levels), b"".join(data)
+    for k in range(len(levels) - 1):
+        for x, y, z in list(levels[k]):
+            levels[k + 1].setdefault((x // 2, y // 2, z // 2), b"")
+    table, data = [], []
+    for level in levels:
+        positions = sorted(level, key=_morton)
+        table.append((positions, [len(level[p]) for p in positions]))
+        data.extend(level[p] for p in positions)
+    return _manifest(shape, grid_origin, table), b"".join(data)
 
 
-def _encoded(level: dict, bits: int, draco) -> tuple[list[tuple[int, int, int]], list[bytes]]:
-    """A level's (or a row's) nodes in Z-curve order and their Draco fragments
-    (empty for a node listed only as a parent)."""
+def _encoded(level: dict, bits: int, draco) -> dict[tuple[int, int, int], bytes]:
+    """A level's (or a row's) nodes' Draco fragments."""
     top = float(2**bits - 1)
-    positions = sorted(level, key=_morton)
-    fragments = [level[p] for p in positions]
-    return positions, [b"" if f is None else _encode(draco, *f, bits, top) for f in fragments]
+    return {position: _encode(draco, *f, bits, top) for position, f in level.items()}
 
 
 def _manifest(
