@@ -35,9 +35,9 @@ the peer), beside the best and median times. The pipelines:
   object rather than per voxel.
 - ``layer-one``: one large object (a bumpy ball in a 448^3 uint8 volume, 1.5 million
   triangles) to a layer of one level cut into 64-voxel fragments, within ``--max-memory
-  256M`` and whole, beside the same surface as a PLY within that budget (the bound the
-  other outputs keep) and the zmesh + cloud-volume script (one legacy fragment):
-  the peak of cutting one large object.
+  256M`` and whole, and of 3 levels within that budget, beside the same surface as a
+  PLY within it (the bound the other outputs keep) and the zmesh + cloud-volume script
+  (one legacy fragment): the peak of cutting and decimating one large object.
 - ``layer-cluster``: the same object's layer with ``--scheduler``, on a Dask cluster this
   benchmark starts (``dask scheduler`` and ``dask worker --nworkers 2 --nthreads 1`` on
   127.0.0.1), beside the same layer made in memory; the workers' peak resident size is
@@ -398,6 +398,10 @@ def one_object_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]
         ),  # fmt: skip
         Command("isoconvert fragments 64, in memory", layer + ["-o", str(tmp / "one_m")]),
         Command(
+            f"isoconvert 3 levels, fragments 64 --max-memory {LARGE_BUDGET}",
+            [*layer[:-3], "3", *layer[-2:], *budget, "-o", str(tmp / "one_3")],
+        ),
+        Command(
             f"isoconvert PLY --max-memory {LARGE_BUDGET}",
             base + budget + ["-o", str(tmp / "one.ply")],
         ),  # fmt: skip
@@ -407,7 +411,9 @@ def one_object_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]
         ),
     ]
     peer = "zmesh + cloud-volume script (legacy)"
-    return commands, [(commands[0].name, commands[2].name, None), (commands[1].name, peer, None)]
+    ply = commands[3].name
+    return commands, [(commands[0].name, ply, None), (commands[2].name, ply, None),
+                      (commands[1].name, peer, None)]  # fmt: skip
 
 
 def cluster_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list, object]:

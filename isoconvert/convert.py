@@ -436,9 +436,10 @@ def layer_objects_on(opts: ConvertOptions, source: str):
     """Where a layer's objects are encoded (``write_precomputed``'s ``map_objects``):
     with ``--scheduler``, each object is one task of the cluster (its coarser levels
     decimated, everything Draco-encoded and the fragments written by a worker, the
-    manifest sent back and written here, in order), or, one level cut into
-    fragments from a label's parts, each z-row of its fragments is (the fragments
-    sent back); otherwise None, here."""
+    manifest sent back and written here, in order), or, for a label cut into
+    fragments from its parts, each z-row of its level-0 fragments is (the fragments
+    sent back; a large label's coarser levels are made here, in slabs); otherwise
+    None, here."""
     address = opts.blocks.scheduler
     if address is None:
         return None

@@ -225,3 +225,21 @@ def test_a_mesh_without_triangles_is_its_own_decimation(n_vertices, kwargs):
     record = result.info["decimation"]
     assert record["triangles_before"] == record["triangles_after"] == 0
     assert record["attempts"] == 0 and record["locked_vertices"] == 0
+
+
+def test_locked_vertices_stay_and_the_rest_collapse_within_the_bound():
+    """collapse(locked=...): every locked vertex is still a corner of the result,
+    where an unlocked collapse removes most of them, and the result stays within
+    its bound of the input both ways; its triangles index the input's vertices."""
+    from isoconvert.post.decimate import collapse
+
+    mesh = extract(Volume(ball(40, 15.3)), 0.0)
+    locked = mesh.vertices[:, 2] > np.median(mesh.vertices[:, 2])  # the upper half
+    free, _ = collapse(mesh, max_error=0.5)
+    kept, report = collapse(mesh, max_error=0.5, locked=locked)
+    assert np.isin(np.flatnonzero(locked), free).mean() < 0.5
+    assert np.isin(np.flatnonzero(locked), kept).all()
+    assert len(free) < len(kept) < len(mesh.cells)
+    assert report["locked_vertices"] >= locked.sum()
+    forward, backward = two_sided_distances(mesh, Mesh(mesh.vertices, kept), 20_000)
+    assert max(forward, backward) <= 0.5 + 1e-9
