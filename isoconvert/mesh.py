@@ -438,8 +438,8 @@ class MeshParts(Protocol):
     def slabs(
         self, to_index: Callable[[np.ndarray], np.ndarray], count: int
     ) -> Iterator[tuple[Mesh, np.ndarray, np.ndarray]]:
-        """The mesh in ``count`` z-slabs (by ``to_index``), each triangle in one:
-        per slab its mesh (in the whole mesh's order, over its vertices in theirs),
+        """The mesh in ``count`` z-slabs (by ``to_index``; some may be empty), each
+        triangle in one: per slab its mesh (in the whole mesh's order, over its vertices in theirs),
         its vertices' ids ``(V_s,) int64`` (increasing, the same for a vertex in
         every slab), and ``(V_s,) bool``: which of them other slabs use too."""
         ...

@@ -390,8 +390,6 @@ class LabelParts:
         release(net.corners)
         for n in range(count):
             taken = order[ends[n] : ends[n + 1]]
-            if not len(taken):
-                continue
             inside = int(np.searchsorted(taken, self._inside))
             _, used, local, verts = _native.label_mesh(
                 net.corners, net.cut, net.vertices, self._quads[taken], inside

@@ -442,8 +442,8 @@ def write_precomputed(
             else:
                 # elsewhere (a cluster's workers): each object's task writes its
                 # fragments into the part folder itself when it sees it, and only
-                # the manifest comes back (see write_object); a row's fragments come
-                # back, to be put in the object's order here
+                # the manifest comes back (see write_object); a row's fragments and
+                # a slab's collapse come back, to be put together here
                 done = map_objects(
                     write_object,
                     (
@@ -471,7 +471,8 @@ def write_precomputed(
                     level: dict = {}
                     for fragments in [first, *(next(done) for _ in range(plan.rows - 1))]:
                         level.update(fragments)
-                    coarser = plan.coarse() if plan.coarse is not None else []
+                    slabs = [next(done) for _ in range(plan.slabs)]
+                    coarser = plan.coarse(slabs) if plan.coarse is not None else []
                     manifest, data = _assemble([level, *coarser], plan.shape, plan.grid_origin)
                 written = isinstance(data, int)  # its size: the task wrote the data
                 if spec is None:
@@ -577,12 +578,14 @@ SLAB_TRIANGLES = 1 << 18
 @dataclass(frozen=True)
 class _Rows:
     """An object made a z-row of level-0 nodes at a time: its octree, its rows'
-    count, and, with coarser levels, what makes them (:func:`_coarse_levels`)."""
+    count, and, with coarser levels, its slabs' count and what makes the levels
+    from their collapses (:func:`_coarse_fragments`)."""
 
     shape: np.ndarray
     grid_origin: np.ndarray
     rows: int
-    coarse: Callable[[], list[dict]] | None
+    slabs: int = 0
+    coarse: Callable[[list[tuple]], list[dict]] | None = None
 
 
 def _tasks(
@@ -602,10 +605,10 @@ def _tasks(
     parts, ``(segment, _Rows)`` for one :func:`encode_row` task per z-row of
     level-0 nodes its box reaches, each made of the triangles that reach the row,
     so that no object's whole mesh is built (the same bytes, as :func:`_cut_level`
-    makes each row from those triangles alone). Such an object's coarser levels
-    are made after its rows, from slabs of it (:func:`_coarse_levels`); an object
-    of at most :data:`LARGE_OBJECT` triangles with coarser levels, or held by one
-    node, is its whole mesh."""
+    makes each row from those triangles alone), then, with coarser levels, one
+    :func:`collapse_slab` task per z-slab of it (:func:`_coarse_levels`); an
+    object of at most :data:`LARGE_OBJECT` triangles with coarser levels, or held
+    by one node, is its whole mesh."""
     top = float(2**bits - 1)
 
     def to_index(world: np.ndarray) -> np.ndarray:
@@ -620,17 +623,21 @@ def _tasks(
             if cut and (lods == 1 or pieces.n_cells > LARGE_OBJECT):
                 frame = _level_frame(grid_origin, shape, 0, top, lo, hi)
                 rows = _rows(frame)
-                coarse = None
+                plan = _Rows(shape, grid_origin, len(rows))
                 if lods > 1:
-                    coarse = functools.partial(
-                        _coarse_fragments, pieces, to_index, lods, collapse,
-                        (grid_origin, shape, top, lo, hi), bits,
+                    octree = (grid_origin, shape, top, lo, hi)
+                    plan = _Rows(
+                        shape, grid_origin, len(rows), -(-pieces.n_cells // SLAB_TRIANGLES),
+                        functools.partial(_coarse_fragments, lods, collapse, octree, bits),
                     )  # fmt: skip
-                plans.append((segment, _Rows(shape, grid_origin, len(rows), coarse)))
+                plans.append((segment, plan))
                 for row in rows:
                     part = pieces.reaching(to_index, *_row_span(frame, row))
                     args = (part.vertices, part.cells, origin, inverse, frame, row, bits)
                     yield segment, f"object {segment}, z-row {row} of fragments", encode_row, args
+                for n, (slab, used, shared) in enumerate(pieces.slabs(to_index, plan.slabs)):
+                    args = (slab.vertices, slab.cells, used, shared, origin, inverse, collapse)
+                    yield segment, f"object {segment}, slab {n} of its levels", collapse_slab, args
                 continue
             mesh = pieces.whole()
         else:
@@ -642,44 +649,80 @@ def _tasks(
 
 
 def _coarse_fragments(
-    pieces: MeshParts, to_index: Callable, lods: int, collapse: Collapse, octree: tuple, bits: int
+    lods: int, collapse: Collapse, octree: tuple, bits: int, slabs: list[tuple]
 ) -> list[dict[tuple[int, int, int], bytes]]:
-    """A large object's coarser levels (:func:`_coarse_levels`), cut and encoded
-    (``octree``: its grid origin, finest nodes' shape, ``top``, and box)."""
+    """A large object's coarser levels from its slabs' collapses
+    (:func:`_coarse_levels`), cut and encoded (``octree``: its grid origin, finest
+    nodes' shape, ``top``, and box)."""
     grid_origin, shape, top, lo, hi = octree
     levels = []
-    for k, mesh in enumerate(_coarse_levels(pieces, to_index, lods, collapse), start=1):
+    for k, mesh in enumerate(_coarse_levels(slabs, lods, collapse), start=1):
         frame = _level_frame(grid_origin, shape, k, top, lo, hi)
         levels.append(_encoded(_cut_level(mesh.vertices, mesh.cells, frame), bits, _dracopy()))
     return levels
 
 
-def _coarse_levels(
-    pieces: MeshParts, to_index: Callable, lods: int, collapse: Collapse
-) -> list[Mesh]:
+def collapse_slab(
+    vertices: np.ndarray,
+    cells: np.ndarray,
+    used: np.ndarray,
+    shared: np.ndarray,
+    origin: np.ndarray,
+    inverse: np.ndarray,
+    collapse: Collapse,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One z-slab of a large object collapsed within half a unit, the first step
+    of its coarser levels (:func:`_coarse_levels`): a task of arrays and a
+    function, which a cluster's worker can run. The vertices it shares with other
+    slabs, and their neighbours, stay where they are.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+        The slab's world positions.
+    cells : (C, 3) int64
+    used : (V,) int64
+        Its vertices' ids in the object (:meth:`~isoconvert.mesh.MeshParts.slabs`).
+    shared : (V,) bool
+        Which of them other slabs use too.
+    origin, inverse
+        As :func:`encode_object`.
+    collapse : callable
+
+    Returns
+    -------
+    ids : (K,) int64
+        The ids of the vertices the collapse left.
+    positions : (K, 3) float64
+        Their index coordinates.
+    cells : (C', 3) int64
+        The collapsed triangles, over the vertices' ids.
+    """
+    index = _index_of(vertices, origin, inverse)
+    local = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
+    if not len(local):
+        return used[:0], index[:0], local
+    near = shared[local].any(axis=1)
+    kept = shared.copy()
+    kept[local[near].reshape(-1)] = True
+    out = collapse(Mesh(index, local), 0.5, kept)
+    still = np.unique(out)
+    return used[still], index[still], used[out]
+
+
+def _coarse_levels(slabs: list[tuple], lods: int, collapse: Collapse) -> list[Mesh]:
     """Levels 1 to ``lods - 1`` of a large object (index coordinates), never
     collapsing its whole mesh: level 1 is collapsed in z-slabs of about
-    :data:`SLAB_TRIANGLES` triangles each, within half its bound of its slab (the
-    vertices a slab shares with others, and their neighbours, kept, so that the
-    slabs still meet and no two collapses join the same two shared vertices); then
-    level k is the slabs' union collapsed whole within the rest of its bound,
-    ``2**(k - 1) - 0.5``. The bounds add: level k lies within ``2**(k - 1)`` of
-    level 0 both ways, as a whole collapse's would. The union is a fraction of the
-    object (1.5 M triangles to 60k on the benchmark's bumpy ball), and collapsing
-    level 2 from it rather than from level 1 keeps a quarter fewer triangles."""
-    count = -(-pieces.n_cells // SLAB_TRIANGLES)
-    ids, cells, positions = [], [], []
-    for slab, used, shared in pieces.slabs(to_index, count):
-        local = np.asarray(slab.cells, dtype=np.int64)
-        index = to_index(slab.vertices)
-        near = shared[local].any(axis=1)
-        kept = shared.copy()
-        kept[local[near].reshape(-1)] = True
-        out = collapse(Mesh(index, local), 0.5, kept)
-        still = np.unique(out)  # the slab's vertices the collapse left
-        ids.append(used[still])
-        positions.append(index[still])
-        cells.append(used[out])
+    :data:`SLAB_TRIANGLES` triangles each, within half its bound of its slab
+    (:func:`collapse_slab`: ``slabs`` are their results; the vertices a slab shares
+    with others, and their neighbours, kept, so that the slabs still meet and no
+    two collapses join the same two shared vertices); then level k is the slabs'
+    union collapsed whole within the rest of its bound, ``2**(k - 1) - 0.5``. The
+    bounds add: level k lies within ``2**(k - 1)`` of level 0 both ways, as a
+    whole collapse's would. The union is a fraction of the object (1.5 M
+    triangles to 60k on the benchmark's bumpy ball), and collapsing level 2 from
+    it rather than from level 1 keeps a quarter fewer triangles."""
+    ids, positions, cells = zip(*slabs, strict=True)
     # the union, over the vertices its triangles use (a shared one, in two slabs,
     # has one position), in the order of their ids
     every, first = np.unique(np.concatenate(ids), return_index=True)
@@ -752,14 +795,15 @@ def _index_of(world: np.ndarray, origin: np.ndarray, inverse: np.ndarray) -> np.
 
 def write_object(
     target: str | None, layer: str, encode: Callable, *args
-) -> tuple[bytes, bytes | int] | dict:
-    """A layer's task on a cluster: ``encode(*args)``, :func:`encode_object` or
-    :func:`encode_row`. An object's fragment data is written by the task itself
-    to ``target`` (in the layer's part folder) when it sees that folder (a file
-    system shared with the client, as a cluster's output usually is), and only
-    the manifest and the data's size come back; a task that does not see it sends
-    the data back instead, for the client to write. A row's fragments (``target``
-    None) always come back: the client puts them in the object's order.
+) -> tuple | dict:
+    """A layer's task on a cluster: ``encode(*args)``, :func:`encode_object`,
+    :func:`encode_row` or :func:`collapse_slab`. An object's fragment data is
+    written by the task itself to ``target`` (in the layer's part folder) when it
+    sees that folder (a file system shared with the client, as a cluster's output
+    usually is), and only the manifest and the data's size come back; a task that
+    does not see it sends the data back instead, for the client to write. A row's
+    fragments (``target`` None) always come back, to be put in the object's order,
+    and so does a slab's collapse.
 
     Parameters
     ----------
@@ -775,7 +819,7 @@ def write_object(
     -------
     tuple or dict
         An object's manifest and fragment data (bytes, or its size once written
-        to ``target``); a row's fragments by node.
+        to ``target``); a row's fragments by node; a slab's collapse.
     """
     from ..atomic import DISK_FULL_ERRNOS, disk_full_error
 
