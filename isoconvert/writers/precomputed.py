@@ -793,9 +793,7 @@ def _index_of(world: np.ndarray, origin: np.ndarray, inverse: np.ndarray) -> np.
     return d[:, 0:1] * inverse[:, 0] + d[:, 1:2] * inverse[:, 1] + d[:, 2:3] * inverse[:, 2]
 
 
-def write_object(
-    target: str | None, layer: str, encode: Callable, *args
-) -> tuple | dict:
+def write_object(target: str | None, layer: str, encode: Callable, *args) -> tuple | dict:
     """A layer's task on a cluster: ``encode(*args)``, :func:`encode_object`,
     :func:`encode_row` or :func:`collapse_slab`. An object's fragment data is
     written by the task itself to ``target`` (in the layer's part folder) when it
