@@ -712,12 +712,14 @@ def test_one_cut_level_is_encoded_on_the_workers_a_row_of_fragments_per_task(
     assert _layer_files(tmp_path / "there") == _layer_files(tmp_path / "here")
 
 
+@pytest.mark.parametrize("fragments", [4.0, None])
 def test_large_objects_coarser_levels_are_the_same_in_memory_in_slabs_and_on_the_cluster(
-    address, monkeypatch, tmp_path
+    address, monkeypatch, tmp_path, fragments
 ):
     """Objects above LARGE_OBJECT triangles get their coarser levels from slabs of
-    their surface (the others whole): the same layer in memory, read in slabs,
-    and on the cluster (whose workers make level 0 a row at a time)."""
+    their surface (the others whole), cut into fragments or not: the same layer in
+    memory, read in slabs, and on the cluster (whose workers collapse the slabs
+    and make level 0, a row at a time when it is cut)."""
     pytest.importorskip("DracoPy")
     pytest.importorskip("meshoptimizer")
     from isoconvert.label_convert import convert_labels
@@ -731,7 +733,7 @@ def test_large_objects_coarser_levels_are_the_same_in_memory_in_slabs_and_on_the
         precomputed, "_coarse_levels", lambda slabs, *a: slabbed.append(slabs) or real(slabs, *a)
     )
     np.save(tmp_path / "atlas.npy", _atlas())
-    options = {"format": "precomputed", "lods": 2, "fragment_size": 4.0}
+    options = {"format": "precomputed", "lods": 2, "fragment_size": fragments}
     runs = {"memory": Blocks(), "slabs": Blocks(size=7), "cluster": Blocks(scheduler=address)}
     for name, blocks in runs.items():
         convert_labels(tmp_path / "atlas.npy", tmp_path / name, blocks=blocks, **options)

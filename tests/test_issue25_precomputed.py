@@ -567,14 +567,15 @@ def test_fragments_are_an_octree_whose_seams_stay_closed(tmp_path, labelled, siz
                 assert there.max() <= step and back_there.max() <= step
 
 
+@pytest.mark.parametrize("chunk", [8.0, None])
 def test_large_objects_coarser_levels_are_collapsed_in_slabs_within_their_bound(
-    tmp_path, labelled, monkeypatch
+    tmp_path, labelled, monkeypatch, chunk
 ):
-    """Objects above LARGE_OBJECT triangles, cut into fragments from their parts:
-    no label's whole surface is built nor collapsed (each collapse gets one slab,
-    or the slabs' union, fewer triangles than the label's); cloud-volume reads
-    each coarser level closed, with fewer triangles than the level above, and
-    within its bound of level 0 both ways (plus a quantization step)."""
+    """Objects above LARGE_OBJECT triangles given in parts, cut into fragments or
+    not: no label's whole surface is collapsed (each collapse gets one slab, or
+    the slabs' union, fewer triangles than the label's), nor, cut, built; cloud-
+    volume reads each coarser level closed, with fewer triangles than the level
+    above, and within its bound of level 0 both ways (plus a quantization step)."""
     from isoconvert.writers import precomputed
 
     volume, _ = labelled
@@ -600,8 +601,9 @@ def test_large_objects_coarser_levels_are_collapsed_in_slabs_within_their_bound(
 
     layer = tmp_path / "layer"
     write_precomputed(layer, parted.meshes, parted.grid, unit="µm", lods=3, collapse=recorded,
-                      chunk=8.0, parts=parts, object_threads=1)  # fmt: skip
-    assert built == []
+                      chunk=chunk, parts=parts, object_threads=1)  # fmt: skip
+    # uncut, level 0 is one fragment of the whole surface
+    assert built == ([] if chunk else list(sizes))
     for label, count in sizes.items():
         slabs = [(n, bound) for n, bound, locked in inputs[label] if locked]
         unions = [(n, bound) for n, bound, locked in inputs[label] if not locked]
@@ -624,9 +626,12 @@ def test_large_objects_coarser_levels_are_collapsed_in_slabs_within_their_bound(
             if previous is not None:
                 assert len(union.faces) < previous
             previous = len(union.faces)
-            bound = (2.0 ** (lod - 1) if lod else 0.0) + np.linalg.norm(
-                8.0 * 2.0**lod / (2**16 - 1) * np.ones(3)
-            ) + 1e-5  # fmt: skip
+            step = (
+                np.full(3, 8.0 * 2.0**lod / (2**16 - 1))
+                if chunk
+                else 2 * _half_step(original.vertices, lod)
+            )
+            bound = (2.0 ** (lod - 1) if lod else 0.0) + np.linalg.norm(step) + 1e-5
             points = np.vstack([union.vertices, union.sample(3000, seed=1)])
             _, there, _ = trimesh.proximity.closest_point(original, points)
             points = np.vstack([original.vertices, original.sample(3000, seed=2)])

@@ -601,14 +601,14 @@ def _tasks(
 ) -> Iterator[tuple[int, str, Callable, tuple]]:
     """Each object's tasks, ``(segment, what, encode, args)``, an object at a time,
     its plan put in ``plans`` before them: ``(segment, None)`` for one
-    :func:`encode_object` task, or, for an object cut into fragments from its
-    parts, ``(segment, _Rows)`` for one :func:`encode_row` task per z-row of
-    level-0 nodes its box reaches, each made of the triangles that reach the row,
-    so that no object's whole mesh is built (the same bytes, as :func:`_cut_level`
-    makes each row from those triangles alone), then, with coarser levels, one
-    :func:`collapse_slab` task per z-slab of it (:func:`_coarse_levels`); an
-    object of at most :data:`LARGE_OBJECT` triangles with coarser levels, or held
-    by one node, is its whole mesh."""
+    :func:`encode_object` task (its whole mesh), or ``(segment, _Rows)`` for an
+    object given in parts that is cut into fragments with one level, or large
+    (:data:`LARGE_OBJECT` triangles) with more: level 0 is one :func:`encode_row`
+    task per z-row of nodes its box reaches, each made of the triangles that reach
+    the row, so that no object's whole mesh is built (the same bytes, as
+    :func:`_cut_level` makes each row from those triangles alone), or, held by one
+    node, one :func:`encode_node` task; then a large one's coarser levels are one
+    :func:`collapse_slab` task per z-slab of it (:func:`_coarse_levels`)."""
     top = float(2**bits - 1)
 
     def to_index(world: np.ndarray) -> np.ndarray:
@@ -616,22 +616,28 @@ def _tasks(
 
     for key in meshes:  # a mapping that builds each mesh when asked for is asked once
         segment = int(key)
-        if parts is not None and chunk is not None:
-            pieces = parts(segment)
+        pieces = parts(segment) if parts is not None else None
+        large = pieces is not None and lods > 1 and pieces.n_cells > LARGE_OBJECT
+        if pieces is not None and (chunk is not None or large):
             lo, hi = pieces.extent(to_index)
             grid_origin, shape, cut = _frame(lo, hi, chunk)
-            if cut and (lods == 1 or pieces.n_cells > LARGE_OBJECT):
+            if large or (cut and lods == 1):
                 frame = _level_frame(grid_origin, shape, 0, top, lo, hi)
-                rows = _rows(frame)
+                rows = _rows(frame) if cut else range(1)
                 plan = _Rows(shape, grid_origin, len(rows))
-                if lods > 1:
-                    octree = (grid_origin, shape, top, lo, hi)
+                if large:
+                    octree = (grid_origin, shape, top, lo, hi, cut)
                     plan = _Rows(
                         shape, grid_origin, len(rows), -(-pieces.n_cells // SLAB_TRIANGLES),
                         functools.partial(_coarse_fragments, lods, collapse, octree, bits),
                     )  # fmt: skip
                 plans.append((segment, plan))
-                for row in rows:
+                if not cut:  # level 0 is one fragment: the whole mesh
+                    whole = pieces.whole()
+                    args = (whole.vertices, whole.cells, origin, inverse, grid_origin, shape, bits)
+                    del whole
+                    yield segment, f"object {segment}, level 0", encode_node, args
+                for row in rows if cut else ():
                     part = pieces.reaching(to_index, *_row_span(frame, row))
                     args = (part.vertices, part.cells, origin, inverse, frame, row, bits)
                     yield segment, f"object {segment}, z-row {row} of fragments", encode_row, args
@@ -653,13 +659,35 @@ def _coarse_fragments(
 ) -> list[dict[tuple[int, int, int], bytes]]:
     """A large object's coarser levels from its slabs' collapses
     (:func:`_coarse_levels`), cut and encoded (``octree``: its grid origin, finest
-    nodes' shape, ``top``, and box)."""
-    grid_origin, shape, top, lo, hi = octree
+    nodes' shape, ``top``, box, and whether it is cut: else each level is one
+    fragment)."""
+    grid_origin, shape, top, lo, hi, cut = octree
     levels = []
     for k, mesh in enumerate(_coarse_levels(slabs, lods, collapse), start=1):
-        frame = _level_frame(grid_origin, shape, k, top, lo, hi)
-        levels.append(_encoded(_cut_level(mesh.vertices, mesh.cells, frame), bits, _dracopy()))
+        if cut:
+            frame = _level_frame(grid_origin, shape, k, top, lo, hi)
+            level = _cut_level(mesh.vertices, mesh.cells, frame)
+        else:
+            level = _one_node(mesh.vertices, mesh.cells, grid_origin, shape * 2.0**k, top)
+        levels.append(_encoded(level, bits, _dracopy()))
     return levels
+
+
+def encode_node(
+    vertices: np.ndarray,
+    cells: np.ndarray,
+    origin: np.ndarray,
+    inverse: np.ndarray,
+    grid_origin: np.ndarray,
+    shape: np.ndarray,
+    bits: int,
+) -> dict[tuple[int, int, int], bytes]:
+    """Level 0 of an object held by one node (its box, ``grid_origin`` and
+    ``shape``), Draco-encoded: a task of arrays and scalars, as :func:`encode_row`.
+    ``vertices`` are world positions, the rest as :func:`encode_object`'s."""
+    index = _index_of(vertices, origin, inverse)
+    level = _one_node(index, np.asarray(cells, np.int64), grid_origin, shape, float(2**bits - 1))
+    return _encoded(level, bits, _dracopy())
 
 
 def collapse_slab(
@@ -795,13 +823,13 @@ def _index_of(world: np.ndarray, origin: np.ndarray, inverse: np.ndarray) -> np.
 
 def write_object(target: str | None, layer: str, encode: Callable, *args) -> tuple | dict:
     """A layer's task on a cluster: ``encode(*args)``, :func:`encode_object`,
-    :func:`encode_row` or :func:`collapse_slab`. An object's fragment data is
-    written by the task itself to ``target`` (in the layer's part folder) when it
-    sees that folder (a file system shared with the client, as a cluster's output
-    usually is), and only the manifest and the data's size come back; a task that
-    does not see it sends the data back instead, for the client to write. A row's
-    fragments (``target`` None) always come back, to be put in the object's order,
-    and so does a slab's collapse.
+    :func:`encode_row`, :func:`encode_node` or :func:`collapse_slab`. An object's
+    fragment data is written by the task itself to ``target`` (in the layer's part
+    folder) when it sees that folder (a file system shared with the client, as a
+    cluster's output usually is), and only the manifest and the data's size come
+    back; a task that does not see it sends the data back instead, for the client
+    to write. The others' results (``target`` None) always come back: a row's or
+    a node's fragments, to be put in the object's order, and a slab's collapse.
 
     Parameters
     ----------
@@ -1040,16 +1068,23 @@ def _object(
             )
             continue
         # the level lies in the first node (its box is the object's): one fragment
-        if np.bincount(cells.reshape(-1), minlength=len(vertices)).all():
-            # every vertex used (as extracted and decimated meshes are): what
-            # np.unique would give, without sorting 3C indices
-            used, local = np.arange(len(vertices)), cells
-        else:
-            used, local = np.unique(cells, return_inverse=True)
-        node = shape * 2.0**k
-        q = np.clip(np.rint((vertices[used] - grid_origin) / node * top), 0, top)
-        nodes.append({(0, 0, 0): (q.astype(np.uint32), local.reshape(-1, 3).astype(np.uint32))})
+        nodes.append(_one_node(vertices, cells, grid_origin, shape * 2.0**k, top))
     return _assemble([_encoded(level, bits, draco) for level in nodes], shape, grid_origin)
+
+
+def _one_node(
+    vertices: np.ndarray, cells: np.ndarray, grid_origin: np.ndarray, node: np.ndarray, top: float
+) -> dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]:
+    """A level held by its octree's first node (of shape ``node``): its quantized
+    vertices and triangles."""
+    if np.bincount(cells.reshape(-1), minlength=len(vertices)).all():
+        # every vertex used (as extracted and decimated meshes are): what
+        # np.unique would give, without sorting 3C indices
+        used, local = np.arange(len(vertices)), cells
+    else:
+        used, local = np.unique(cells, return_inverse=True)
+    q = np.clip(np.rint((vertices[used] - grid_origin) / node * top), 0, top)
+    return {(0, 0, 0): (q.astype(np.uint32), local.reshape(-1, 3).astype(np.uint32))}
 
 
 def _level_frame(
