@@ -506,8 +506,8 @@ def disk_full_error(
     call this once the partial file is gone.
     """
     free = free_space(path)
-    parts = [f"needs {'more than ' if more else ''}{_mib(needs)}"] if needs > 0 else []
-    parts += [f"{_mib(free)} free"] if free is not None else []
+    parts = [f"needs {'more than ' if more else ''}{_amount(needs)}"] if needs > 0 else []
+    parts += [f"{_amount(free)} free"] if free is not None else []
     told = f" ({', '.join(parts)})" if parts else ""
     return DiskFullError(
         f"disk full at {path}{told}{' ' + why if why else ''}; free space there or write elsewhere",
@@ -517,8 +517,12 @@ def disk_full_error(
     )
 
 
-def _mib(n: int) -> str:
-    return f"{n / 2**20:.1f} MiB"
+def _amount(n: int) -> str:
+    """Bytes as a reader takes them in: MiB from 1 MiB (to a tenth), else KiB, else bytes
+    (a nearly full disk's few KiB are not "0.0 MiB")."""
+    if n >= 2**20:
+        return f"{n / 2**20:.1f} MiB"
+    return f"{n / 2**10:.1f} KiB" if n >= 2**10 else f"{n} bytes"
 
 
 def _size(tmp: str) -> int:

@@ -511,3 +511,23 @@ def test_signal_while_label_files_are_written_side_by_side(tmp_path, signum):
     assert len(written) < len(list(reference.iterdir()))  # it was stopped part of the way
     for path in written:
         assert path.read_bytes() == (reference / path.name).read_bytes(), path.name
+
+
+@pytest.mark.parametrize(
+    "needs, free, told",
+    [
+        (3 * 2**20 + 2**19, 12 * 2**20, "(needs more than 3.5 MiB, 12.0 MiB free)"),
+        (900_000, 8192, "(needs more than 878.9 KiB, 8.0 KiB free)"),
+        (2**20, 512, "(needs more than 1.0 MiB, 512 bytes free)"),
+    ],
+)
+def test_a_full_disk_names_small_amounts_in_kib_or_bytes(tmp_path, monkeypatch, needs, free, told):
+    """Below 1 MiB the line gives KiB (or bytes), not "0.0 MiB"."""
+    from isoconvert import atomic
+
+    monkeypatch.setattr(atomic, "free_space", lambda path: free)
+    error = atomic.disk_full_error(tmp_path / "m.ply", needs, more=True)
+    assert (
+        str(error)
+        == f"disk full at {tmp_path / 'm.ply'} {told}; free space there or write elsewhere"
+    )
