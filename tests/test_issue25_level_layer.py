@@ -115,3 +115,61 @@ def test_layer_flags_without_a_layer_are_one_line_errors(tmp_path, flags):
     assert done.returncode != 0 and "Traceback" not in done.stderr
     assert f"{flags[0]} is an option of --format precomputed" in done.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["field.npy"]
+
+
+@pytest.mark.parametrize("fragments", [8.0, None])
+def test_large_isosurfaces_get_their_coarser_levels_from_slabs(tmp_path, monkeypatch, fragments):
+    """An isosurface above LARGE_OBJECT triangles is collapsed a slab at a time and
+    then as the slabs' union, never whole: every level closed, with fewer
+    triangles than the one above, within its bound of level 0 (plus a quantization
+    step) both ways; read in blocks, the same layer."""
+    sys_convert = sys.modules["isoconvert.convert"]
+    from isoconvert.extract.slabs import Blocks
+    from isoconvert.writers import precomputed
+
+    monkeypatch.setattr(precomputed, "LARGE_OBJECT", 1000)
+    monkeypatch.setattr(precomputed, "SLAB_TRIANGLES", 600)
+    inputs = []
+    real = sys_convert.bounded_collapse
+    monkeypatch.setattr(
+        sys_convert,
+        "bounded_collapse",
+        lambda mesh, bound, locked=None: inputs.append(mesh.n_cells) or real(mesh, bound, locked),
+    )
+    _nested_balls(tmp_path / "field.npy")
+    common = {"spacing": (0.5, 0.4, 0.7), "force": True}
+    levels = [60.5, 30.5]
+    plys = convert_levels(tmp_path / "field.npy", tmp_path / "f.ply", levels, **common)
+    surface, outer = (read_mesh(ply.output) for ply in plys)
+    assert 2000 < surface.n_cells < outer.n_cells  # both in slabs
+    options = {"format": "precomputed", "lods": 3, "fragment_size": fragments, **common}
+    convert_levels(tmp_path / "field.npy", tmp_path / "layer", levels, **options)
+    # no collapse of a whole surface: the inner one's slabs and union first
+    slabs = next(n for n in range(len(inputs)) if sum(inputs[:n]) >= surface.n_cells)
+    assert sum(inputs[:slabs]) == surface.n_cells and max(inputs[: slabs + 2]) < surface.n_cells
+    assert max(inputs) < outer.n_cells and len(inputs) > 2 * 2
+    convert_levels(tmp_path / "field.npy", tmp_path / "blocks", levels, blocks=Blocks(size=5),
+                   **options)  # fmt: skip
+    for path in (tmp_path / "layer").rglob("*"):
+        if path.is_file():
+            twin = tmp_path / "blocks" / path.relative_to(tmp_path / "layer")
+            assert path.read_bytes() == twin.read_bytes(), path.name
+    cv = _cloud(tmp_path / "layer")
+    original = trimesh.Trimesh(surface.vertices, surface.cells)
+    box = surface.vertices.max(axis=0) - surface.vertices.min(axis=0)
+    previous = None
+    for lod in range(3):
+        back = cv.mesh.get(1, lod=lod)[1]
+        union = trimesh.Trimesh(np.asarray(back.vertices, np.float64), back.faces, process=True)
+        assert union.is_watertight, lod
+        assert previous is None or len(union.faces) < previous
+        previous = len(union.faces)
+        # a step of 16 bits over the node: the fragment size, or the object's box
+        node = np.full(3, fragments) * np.array(common["spacing"]) if fragments else box
+        step = np.linalg.norm(node * 2.0**lod / 65535)
+        bound = (2.0 ** (lod - 1) if lod else 0.0) * max(common["spacing"]) + step + 1e-6
+        points = np.vstack([union.vertices, union.sample(2000, seed=1)])
+        _, there, _ = trimesh.proximity.closest_point(original, points)
+        points = np.vstack([original.vertices, original.sample(2000, seed=2)])
+        _, back_there, _ = trimesh.proximity.closest_point(union, points)
+        assert there.max() <= bound and back_there.max() <= bound, lod

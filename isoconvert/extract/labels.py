@@ -95,7 +95,7 @@ from .. import _native
 from ..atomic import DiskFullError, disk_full_error, free_space
 from ..errors import LevelError, VolumeError
 from ..memory import release, release_freed_memory
-from ..mesh import Mesh, MeshSummary
+from ..mesh import Mesh, MeshSummary, slab_split
 from ..threads import kernel_threads
 from ..volume import Volume
 from .label_blocks import (
@@ -367,26 +367,11 @@ class LabelParts:
     def slabs(
         self, to_index: Callable[[np.ndarray], np.ndarray], count: int
     ) -> Iterator[tuple[Mesh, np.ndarray, np.ndarray]]:
-        # a quad's slab by its lowest corner, in ``count`` equal z-ranges
+        # a quad's slab by its lowest corner
         if self._low is None:
             self.extent(to_index)
         net = self._owner._net
-        low, span = self._low.min(), float(np.ptp(self._low))
-        slab = np.zeros(len(self._quads), dtype=np.int64)
-        if span > 0:
-            slab = np.minimum(((self._low - low) / span * count).astype(np.int64), count - 1)
-        # each slab's quads, in their order; then the vertices of more than one slab's
-        order = np.argsort(slab, kind="stable")
-        ends = np.searchsorted(slab[order], np.arange(count + 1))
-        corners = net.corners[self._quads]
-        base = int(corners.min()) if len(corners) else 0
-        seen = np.zeros(int(corners.max()) - base + 1 if len(corners) else 0, dtype=bool)
-        shared = np.zeros_like(seen)
-        for n in range(count):
-            ids = np.unique(corners[order[ends[n] : ends[n + 1]]]) - base
-            shared[ids] |= seen[ids]
-            seen[ids] = True
-        del corners, seen
+        order, ends, shared, base = slab_split(self._low, net.corners[self._quads], count)
         release(net.corners)
         for n in range(count):
             taken = order[ends[n] : ends[n + 1]]

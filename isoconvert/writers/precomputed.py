@@ -82,7 +82,7 @@ import numpy as np
 from ..atomic import atomic_folder
 from ..errors import FormatError, IsoconvertError, OutputError, extra_hint
 from ..geometry import normalized_grid
-from ..mesh import Mesh, MeshParts
+from ..mesh import Mesh, MeshParts, slab_split
 from ..threads import kernel_threads, threaded_in_order
 from ..units import meters_per_unit
 from ..volume import Volume
@@ -616,7 +616,14 @@ def _tasks(
 
     for key in meshes:  # a mapping that builds each mesh when asked for is asked once
         segment = int(key)
-        pieces = parts(segment) if parts is not None else None
+        mesh = pieces = None
+        if parts is not None:
+            pieces = parts(segment)
+        else:
+            mesh = meshes[key]
+            _check_mesh(segment, mesh)
+            if lods > 1 and len(mesh.cells) > LARGE_OBJECT:  # coarser levels from slabs too
+                pieces = _WholeParts(mesh)
         large = pieces is not None and lods > 1 and pieces.n_cells > LARGE_OBJECT
         if pieces is not None and (chunk is not None or large):
             lo, hi = pieces.extent(to_index)
@@ -645,13 +652,58 @@ def _tasks(
                     args = (slab.vertices, slab.cells, used, shared, origin, inverse, collapse)
                     yield segment, f"object {segment}, slab {n} of its levels", collapse_slab, args
                 continue
+        if mesh is None:
             mesh = pieces.whole()
-        else:
-            mesh = meshes[key]
-        _check_mesh(segment, mesh)
+            _check_mesh(segment, mesh)
         plans.append((segment, None))
         args = (mesh.vertices, mesh.cells, origin, inverse, lods, bits, chunk, collapse)
         yield segment, f"object {segment}", encode_object, args
+
+
+class _WholeParts:
+    """An object given whole as :class:`~isoconvert.mesh.MeshParts` (a large
+    isosurface, a post-processed label), so that its coarser levels come from
+    slabs as a label's do: each triangle's slab by its lowest corner."""
+
+    def __init__(self, mesh: Mesh) -> None:
+        self._mesh = mesh
+        self._cells = np.asarray(mesh.cells, dtype=np.int64)
+        self._low = self._high = self._box = None
+
+    @property
+    def n_cells(self) -> int:
+        return len(self._cells)
+
+    def _extents(self, to_index: Callable) -> None:
+        if self._low is None:
+            index = to_index(np.asarray(self._mesh.vertices, dtype=np.float64))
+            self._box = index.min(axis=0), index.max(axis=0)
+            self._low, self._high = _extent(index, self._cells, 2)
+
+    def extent(self, to_index: Callable) -> tuple[np.ndarray, np.ndarray]:
+        self._extents(to_index)
+        return self._box
+
+    def reaching(self, to_index: Callable, low: float, high: float) -> Mesh:
+        self._extents(to_index)
+        return self._part((self._high >= low) & (self._low <= high))[0]
+
+    def slabs(
+        self, to_index: Callable, count: int
+    ) -> Iterator[tuple[Mesh, np.ndarray, np.ndarray]]:
+        self._extents(to_index)
+        order, ends, shared, base = slab_split(self._low, self._cells, count)
+        for n in range(count):
+            mesh, used = self._part(order[ends[n] : ends[n + 1]])
+            yield mesh, used, shared[used - base]
+
+    def _part(self, taken: np.ndarray) -> tuple[Mesh, np.ndarray]:
+        """The triangles ``taken`` selects, over the vertices they use, in order."""
+        used, local = np.unique(self._cells[taken], return_inverse=True)
+        return Mesh(np.asarray(self._mesh.vertices)[used], local.reshape(-1, 3)), used
+
+    def whole(self) -> Mesh:
+        return self._mesh
 
 
 def _coarse_fragments(
