@@ -602,8 +602,9 @@ def _tasks(
     """Each object's tasks, ``(segment, what, encode, args)``, an object at a time,
     its plan put in ``plans`` before them: ``(segment, None)`` for one
     :func:`encode_object` task (its whole mesh), or ``(segment, _Rows)`` for an
-    object given in parts that is cut into fragments with one level, or large
-    (:data:`LARGE_OBJECT` triangles) with more: level 0 is one :func:`encode_row`
+    object given in parts that is cut into fragments with one level, or for one
+    large (:data:`LARGE_OBJECT` triangles) with more, given in parts or whole
+    (:class:`_WholeParts`): level 0 is one :func:`encode_row`
     task per z-row of nodes its box reaches, each made of the triangles that reach
     the row, so that no object's whole mesh is built (the same bytes, as
     :func:`_cut_level` makes each row from those triangles alone), or, held by one
