@@ -639,6 +639,52 @@ def test_large_objects_coarser_levels_are_collapsed_in_slabs_within_their_bound(
             assert there.max() <= bound and back_there.max() <= bound, (label, lod)
 
 
+def _voronoi_ball(draw: int) -> np.ndarray:
+    """(40, 40, 40) uint16: six random Voronoi cells in a ball, the ``draw``-th of
+    the seeds generator 1 gives."""
+    rng = np.random.default_rng(1)
+    for _ in range(draw + 1):
+        seeds = rng.uniform(8, 32, size=(6, 3))
+    z, y, x = np.mgrid[:40, :40, :40].astype(float)
+    d = np.stack([(x - a) ** 2 + (y - b) ** 2 + (z - c) ** 2 for a, b, c in seeds])
+    labels = (np.argmin(d, axis=0) + 1).astype(np.uint16)
+    labels[(x - 20) ** 2 + (y - 20) ** 2 + (z - 20) ** 2 > 17**2] = 0
+    return labels
+
+
+@pytest.mark.parametrize("draw", [3, 4])
+def test_slabs_collapsed_apart_meet_in_a_manifold_union(tmp_path, monkeypatch, draw):
+    """Each slab keeps the vertices it shares and their neighbours: with the shared
+    ones alone, collapses on the two sides of a cut could both join the same two
+    shared vertices, an edge of four triangles (one label of each of these volumes
+    had one, in slabs of 150 triangles). Every label's union of slabs uses each
+    edge twice, and its coarser level is closed (by index)."""
+    from isoconvert.writers import precomputed
+
+    monkeypatch.setattr(precomputed, "LARGE_OBJECT", 300)
+    monkeypatch.setattr(precomputed, "SLAB_TRIANGLES", 150)
+    unions = []
+    real = precomputed._coarse_levels
+
+    def seen(slabs, *args):
+        unions.append(np.concatenate([cells for _, _, cells in slabs]))
+        return real(slabs, *args)
+
+    monkeypatch.setattr(precomputed, "_coarse_levels", seen)
+    surfaces = label_surfaces(Volume(_voronoi_ball(draw)), smoothing=16)
+    write_precomputed(tmp_path / "layer", surfaces.meshes, surfaces.grid, lods=2,
+                      collapse=_bounded, parts=surfaces.parts)  # fmt: skip
+    assert len(unions) == len(surfaces.labels)
+    for label, cells in zip(surfaces.labels, unions, strict=True):
+        edges = np.sort(cells[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        _, uses = np.unique(edges, axis=0, return_counts=True)
+        assert (uses == 2).all(), label
+        # closed by its vertices' indices (two of the net's split vertices a hair
+        # apart may share a quantized position: see the README)
+        back = _cloud(tmp_path / "layer").mesh.get(label, lod=1)[label]
+        assert trimesh.Trimesh(back.vertices, back.faces, process=False).is_watertight, label
+
+
 def test_triangles_crossing_several_rows_of_fragments_are_cut_alike_in_each(tmp_path):
     """Fragments are made one z-row of nodes at a time: a triangle taller than a
     row is taken by every row it reaches, and each must cut it at the same planes
