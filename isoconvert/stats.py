@@ -307,6 +307,9 @@ def _positions(centers: np.ndarray) -> np.ndarray:
     span = offset[-1]
     if not span > 0:
         return np.arange(len(centers), dtype=np.float64)
+    if span < (len(centers) - 1) / np.finfo(np.float64).max:
+        # a subnormal span, whose reciprocal overflows: divided first (offsets <= span)
+        return offset / span * (len(centers) - 1)
     return offset * ((len(centers) - 1) / span)
 
 
