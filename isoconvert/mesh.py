@@ -439,9 +439,10 @@ class MeshParts(Protocol):
         self, to_index: Callable[[np.ndarray], np.ndarray], count: int
     ) -> Iterator[tuple[Mesh, np.ndarray, np.ndarray]]:
         """The mesh in ``count`` z-slabs (by ``to_index``; some may be empty), each
-        triangle in one: per slab its mesh (in the whole mesh's order, over its vertices in theirs),
-        its vertices' ids ``(V_s,) int64`` (increasing, the same for a vertex in
-        every slab), and ``(V_s,) bool``: which of them other slabs use too."""
+        triangle in one: per slab its mesh (in the whole mesh's order, over its
+        vertices in theirs), its vertices' ids ``(V_s,) int64`` (increasing, the
+        same for a vertex in every slab), and ``(V_s,) bool``: which of them other
+        slabs use too."""
         ...
 
     def whole(self) -> Mesh:

@@ -74,7 +74,7 @@ import json
 import shutil
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -633,12 +633,10 @@ def _tasks(
                 frame = _level_frame(grid_origin, shape, 0, top, lo, hi)
                 rows = _rows(frame) if cut else range(1)
                 plan = _Rows(shape, grid_origin, len(rows))
-                if large:
+                if large:  # and its slabs, collapsed for its coarser levels
                     octree = (grid_origin, shape, top, lo, hi, cut)
-                    plan = _Rows(
-                        shape, grid_origin, len(rows), -(-pieces.n_cells // SLAB_TRIANGLES),
-                        functools.partial(_coarse_fragments, lods, collapse, octree, bits),
-                    )  # fmt: skip
+                    coarse = functools.partial(_coarse_fragments, lods, collapse, octree, bits)
+                    plan = replace(plan, slabs=-(-pieces.n_cells // SLAB_TRIANGLES), coarse=coarse)
                 plans.append((segment, plan))
                 if not cut:  # level 0 is one fragment: the whole mesh
                     whole = pieces.whole()
@@ -1249,9 +1247,7 @@ def _cut_level(
         theirs: :func:`encode_parts`); None: every row of the object.
     """
     level: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
-    z = vertices[:, 2]
-    low = np.minimum(np.minimum(z[cells[:, 0]], z[cells[:, 1]]), z[cells[:, 2]])
-    high = np.maximum(np.maximum(z[cells[:, 0]], z[cells[:, 1]]), z[cells[:, 2]])
+    low, high = _extent(vertices, cells, 2)
     for row in _rows(frame) if rows is None else rows:
         start, end = _row_span(frame, row)
         taken = (high >= start) & (low <= end)
