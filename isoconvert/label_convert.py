@@ -28,7 +28,7 @@ from .threads import kernel_threads, threaded_in_order
 from .volume import Volume
 from .writers import check_attributes, output_format
 from .writers.precomputed import check_layer, data_type_for, object_file, write_precomputed
-from .writers.precomputed_volume import volume_data_type
+from .writers.precomputed.volume import volume_data_type
 from .writers.stored import write_mesh
 
 

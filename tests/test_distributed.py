@@ -723,7 +723,7 @@ def test_large_objects_coarser_levels_are_the_same_in_memory_in_slabs_and_on_the
     pytest.importorskip("DracoPy")
     pytest.importorskip("meshoptimizer")
     from isoconvert.label_convert import convert_labels
-    from isoconvert.writers import precomputed
+    from isoconvert.writers.precomputed import tasks as precomputed
 
     monkeypatch.setattr(precomputed, "LARGE_OBJECT", 1000)
     monkeypatch.setattr(precomputed, "SLAB_TRIANGLES", 600)

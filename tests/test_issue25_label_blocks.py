@@ -413,7 +413,7 @@ def test_within_the_budget_a_layers_objects_are_encoded_one_at_a_time(tmp_path, 
     pytest.importorskip("DracoPy")
     pytest.importorskip("meshoptimizer")
     from isoconvert.cli import main
-    from isoconvert.writers import precomputed
+    from isoconvert.writers.precomputed import layer as precomputed
 
     monkeypatch.setenv("ISOCONVERT_THREADS", "2")
     at_once = []

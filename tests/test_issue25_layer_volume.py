@@ -19,7 +19,7 @@ from isoconvert.errors import IsoconvertError
 from isoconvert.extract.labels import label_surfaces
 from isoconvert.volume import Volume
 from isoconvert.writers.precomputed import write_precomputed
-from isoconvert.writers.precomputed_volume import compressed_segmentation
+from isoconvert.writers.precomputed.volume import compressed_segmentation
 
 cloudvolume = pytest.importorskip("cloudvolume", reason="pip install cloud-volume")
 cseg = pytest.importorskip("compressed_segmentation", reason="pip install compressed-segmentation")

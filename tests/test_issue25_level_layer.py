@@ -125,7 +125,7 @@ def test_large_isosurfaces_get_their_coarser_levels_from_slabs(tmp_path, monkeyp
     step) both ways; read in blocks, the same layer."""
     sys_convert = sys.modules["isoconvert.convert"]
     from isoconvert.extract.slabs import Blocks
-    from isoconvert.writers import precomputed
+    from isoconvert.writers.precomputed import tasks as precomputed
 
     monkeypatch.setattr(precomputed, "LARGE_OBJECT", 1000)
     monkeypatch.setattr(precomputed, "SLAB_TRIANGLES", 600)

@@ -576,7 +576,7 @@ def test_large_objects_coarser_levels_are_collapsed_in_slabs_within_their_bound(
     the slabs' union, fewer triangles than the label's), nor, cut, built; cloud-
     volume reads each coarser level closed, with fewer triangles than the level
     above, and within its bound of level 0 both ways (plus a quantization step)."""
-    from isoconvert.writers import precomputed
+    from isoconvert.writers.precomputed import tasks as precomputed
 
     volume, _ = labelled
     monkeypatch.setattr(precomputed, "LARGE_OBJECT", 500)
@@ -659,7 +659,7 @@ def test_slabs_collapsed_apart_meet_in_a_manifold_union(tmp_path, monkeypatch, d
     shared vertices, an edge of four triangles (one label of each of these volumes
     had one, in slabs of 150 triangles). Every label's union of slabs uses each
     edge twice, and its coarser level is closed (by index)."""
-    from isoconvert.writers import precomputed
+    from isoconvert.writers.precomputed import tasks as precomputed
 
     monkeypatch.setattr(precomputed, "LARGE_OBJECT", 300)
     monkeypatch.setattr(precomputed, "SLAB_TRIANGLES", 150)

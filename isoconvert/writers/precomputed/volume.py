@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import IsoconvertError
-from ..grid import grid_slab_zyx
-from ..volume import Volume
+from ...errors import IsoconvertError
+from ...grid import grid_slab_zyx
+from ...volume import Volume
 
 #: Voxels a side of a chunk file.
 CHUNK = 64

@@ -1,0 +1,280 @@
+"""An object's octree and its levels cut into the octree's nodes.
+
+Coordinates are index units (sample (i, j, k) at (i, j, k)). The finest nodes are
+``chunk`` a side, or the object's box when it is not cut; a level-k node is
+``2**k`` finest nodes wide. A level's triangles are cut at the planes of its
+nodes' 2x2x2 partition (level 0's at its own nodes' planes), each piece going to
+the node holding its centroid, and each node's vertices are quantized in its box
+(``top`` = ``2**bits - 1`` steps a side).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Octree:
+    """One level's nodes: ``origin + index * node`` (index units), the planes of
+    their partition every ``split``, the quantization's ``top`` (``2**bits - 1``),
+    and the object's box ``lo``..``hi`` (every level's vertices)."""
+
+    origin: np.ndarray
+    node: np.ndarray
+    split: np.ndarray
+    top: float
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+def object_frame(
+    lo: np.ndarray, hi: np.ndarray, chunk: float | None
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """An object's octree: its grid origin, its finest nodes' shape, and whether
+    it is cut (``chunk`` given and the object larger than one node)."""
+    # float32 in the manifest: the box is widened so that float32 rounding of its
+    # origin and shape cannot leave a vertex outside it
+    origin32 = np.nextafter(lo.astype(np.float32), np.float32(-np.inf))
+    grid_origin = origin32.astype(np.float64)
+    box32 = np.nextafter(
+        np.maximum(hi - grid_origin, 1e-6).astype(np.float32), np.float32(np.inf)
+    ).astype(np.float64)
+    cut = not (chunk is None or (box32 <= chunk).all())
+    return grid_origin, (np.full(3, float(np.float32(chunk))) if cut else box32), cut
+
+
+def level_frame(
+    grid_origin: np.ndarray, shape: np.ndarray, k: int, top: float, lo: np.ndarray, hi: np.ndarray
+) -> Octree:
+    """Level ``k``'s nodes, ``2**k`` finest nodes wide, cut at their halves
+    (level 0's at their own planes)."""
+    node = shape * 2.0**k
+    return Octree(grid_origin, node, node / 2.0 if k else node, top, lo, hi)
+
+
+def one_node(
+    vertices: np.ndarray, cells: np.ndarray, grid_origin: np.ndarray, node: np.ndarray, top: float
+) -> dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]:
+    """A level held by its octree's first node (of shape ``node``): its quantized
+    vertices and triangles."""
+    if np.bincount(cells.reshape(-1), minlength=len(vertices)).all():
+        # every vertex used (as extracted and decimated meshes are): what
+        # np.unique would give, without sorting 3C indices
+        used, local = np.arange(len(vertices)), cells
+    else:
+        used, local = np.unique(cells, return_inverse=True)
+    q = np.clip(np.rint((vertices[used] - grid_origin) / node * top), 0, top)
+    return {(0, 0, 0): (q.astype(np.uint32), local.reshape(-1, 3).astype(np.uint32))}
+
+
+def cut_level(
+    vertices: np.ndarray, cells: np.ndarray, frame: Octree, rows: Iterable[int] | None = None
+) -> dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]:
+    """One level's fragments: for each node its quantized vertices and triangles.
+
+    The level is cut one z-row of nodes at a time: the triangles reaching the row
+    (or within a snapping distance of it) are cut at every plane of the partition
+    (:func:`_cut_at_planes`) and the pieces whose centroid lies in the row are
+    kept. A triangle is cut the same way in each row that takes it (the same
+    planes in the same order, each new vertex from the same two ends), so the rows
+    meet exactly; the peak holds one row's pieces, not the whole level's (an
+    object of 1.5 million triangles in 64-voxel fragments within ``--max-memory
+    256M``: 476 MB cut whole, 344 MB a row at a time, see bench/RESULTS.md).
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+        Index coordinates.
+    cells : (C, 3) int64
+    frame : Octree
+    rows : iterable of int or None
+        The z-rows of nodes to make (``vertices`` and ``cells`` then need hold only
+        the triangles that reach them, in the level's order, their vertices in
+        theirs: :func:`.tasks.encode_row`); None: every row of the object.
+    """
+    level: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
+    low, high = triangle_extents(vertices, cells, 2)
+    for row in node_rows(frame) if rows is None else rows:
+        start, end = row_span(frame, row)
+        taken = (high >= start) & (low <= end)
+        if not taken.any():
+            continue
+        # the row's vertices in their order in the level (so that each cut takes
+        # an edge's ends in the same order in every row)
+        used, local = np.unique(cells[taken], return_inverse=True)
+        part, pieces = _cut_at_planes(vertices[used], local.reshape(-1, 3), frame)
+        centroid = part[pieces].mean(axis=1)
+        where = np.maximum(np.floor((centroid - frame.origin) / frame.node).astype(np.int64), 0)
+        mine = where[:, 2] == row
+        if not mine.any():  # the row's triangles are all in the rows beside it
+            continue
+        where, pieces = where[mine], pieces[mine]
+        order = np.lexsort(where.T[::-1])
+        where, pieces = where[order], pieces[order]
+        starts = np.flatnonzero(np.r_[True, (where[1:] != where[:-1]).any(axis=1)])
+        for a, b in zip(starts, np.r_[starts[1:], len(pieces)], strict=True):
+            kept, corners = np.unique(pieces[a:b], return_inverse=True)
+            origin = frame.origin + where[a] * frame.node
+            q = np.clip(np.rint((part[kept] - origin) / frame.node * frame.top), 0, frame.top)
+            # corners the cuts left within a step of each other share a quantized
+            # position: one vertex, and the triangles between them (no area) go;
+            # on a seam both fragments see the same positions, so they merge alike
+            # and the seam stays closed
+            # (one key per position, in the order np.unique(q, axis=0) gives, faster)
+            keys = q.astype(np.int64)
+            keys, same = np.unique(keys[:, 0] << 32 | keys[:, 1] << 16 | keys[:, 2],
+                                   return_inverse=True)  # fmt: skip
+            q = np.stack([keys >> 32, (keys >> 16) & 0xFFFF, keys & 0xFFFF], axis=1)
+            corners = same.reshape(-1)[corners.reshape(-1, 3)]
+            corners = corners[(corners[:, 0] != corners[:, 1]) & (corners[:, 1] != corners[:, 2])
+                              & (corners[:, 0] != corners[:, 2])]  # fmt: skip
+            position = tuple(int(x) for x in where[a])
+            level[position] = (q.astype(np.uint32), corners.astype(np.uint32))
+    return level
+
+
+def node_rows(frame: Octree) -> range:
+    """The z-rows of nodes an object's box reaches."""
+    span = np.floor((np.array([frame.lo[2], frame.hi[2]]) - frame.origin[2]) / frame.node[2])
+    return range(max(int(span[0]), 0), int(span[1]) + 1)
+
+
+def row_span(frame: Octree, row: int) -> tuple[float, float]:
+    """The z-range whose triangles a row of nodes takes: the row, and a snapping
+    distance (a quantization step) beyond it each way."""
+    start = frame.origin[2] + row * frame.node[2]
+    reach = frame.node[2] / frame.top
+    return start - reach, start + frame.node[2] + reach
+
+
+def _cut_at_planes(
+    vertices: np.ndarray, cells: np.ndarray, frame: Octree
+) -> tuple[np.ndarray, np.ndarray]:
+    """Cut triangles at every plane of the partition inside the object's box, x
+    planes first, each axis's in increasing order (:func:`_cut`).
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+        Changed in place (the snapping, see below).
+    cells : (C, 3) int64
+    frame : Octree
+
+    Returns
+    -------
+    vertices : (V', 3) float64
+    cells : (C', 3) int64
+    """
+    for axis in range(3):
+        step = frame.split[axis]
+        first = int(np.floor((frame.lo[axis] - frame.origin[axis]) / step)) + 1
+        last = int(np.ceil((frame.hi[axis] - frame.origin[axis]) / step)) - 1
+        low, high = triangle_extents(vertices, cells, axis)
+        for m in range(max(first, 1), last + 1):
+            plane = frame.origin[axis] + m * step
+            # vertices within a quantization step of the plane go onto it first
+            # (igneous snaps too): cut there, they would leave slivers whose
+            # corners quantize to one position
+            near = np.abs(vertices[:, axis] - plane) < frame.node[axis] / frame.top
+            vertices[near, axis] = plane
+            # snapping moves a vertex towards this plane only from within a step,
+            # never across another: the extents before it still hold every
+            # triangle that crosses the plane
+            maybe = np.flatnonzero((low < plane) & (high > plane))
+            if not len(maybe):
+                continue
+            count = len(cells)
+            vertices, cells, kept = _cut(vertices, cells, axis, plane, maybe)
+            if len(kept) != count:  # cut: the pieces' extents after the others'
+                pieces = cells[len(kept) :]
+                new_low, new_high = triangle_extents(vertices, pieces, axis)
+                low = np.concatenate([low[kept], new_low])
+                high = np.concatenate([high[kept], new_high])
+    return vertices, cells
+
+
+def triangle_extents(
+    vertices: np.ndarray, cells: np.ndarray, axis: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each triangle's lowest and highest coordinate along ``axis``: (C,) each."""
+    x = vertices[:, axis]
+    a, b, c = x[cells[:, 0]], x[cells[:, 1]], x[cells[:, 2]]
+    return np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+
+
+def _cut(
+    vertices: np.ndarray, cells: np.ndarray, axis: int, plane: float, maybe: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Split the triangles that cross the plane ``x[axis] = plane`` (strictly) so
+    that none does, keeping orientation.
+
+    Each crossing edge gets one new vertex exactly on the plane, computed from its
+    ends in increasing index order, so the two triangles beside it share it and
+    the surface stays closed. A triangle with a corner on the plane becomes two,
+    any other crossing one three.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    cells : (C, 3) int64
+    maybe : (M,) int64
+        The triangles that may cross it (every other one is left as it is).
+
+    Returns
+    -------
+    vertices : (V + N, 3) float64
+    cells : (C', 3) int64
+        The triangles that do not cross, in their order, then the pieces.
+    kept : (K,) int64
+        Where the triangles that do not cross were in ``cells``.
+    """
+    side = np.sign(vertices[cells[maybe], axis] - plane).astype(np.int8)  # (M, 3)
+    through = (side.min(axis=1) < 0) & (side.max(axis=1) > 0)
+    if not through.any():
+        return vertices, cells, np.arange(len(cells))
+    crossing = np.zeros(len(cells), bool)
+    crossing[maybe[through]] = True
+    tri, s = cells[crossing], side[through]
+    # rotate each so that corner 0 is the one alone: on the plane, or on its own side
+    zero = s == 0
+    lone = np.where(zero.any(axis=1), np.argmax(zero, axis=1), 0)
+    alone = ~zero.any(axis=1)
+    for j in range(3):  # no corner on the plane: the one whose side the others share not
+        others = [(j + 1) % 3, (j + 2) % 3]
+        pick = alone & (s[:, others[0]] == s[:, others[1]]) & (s[:, j] != s[:, others[0]])
+        lone[pick] = j
+    rows = np.arange(len(tri))[:, None]
+    tri = tri[rows, (lone[:, None] + np.arange(3)) % 3]
+    s = s[rows, (lone[:, None] + np.arange(3)) % 3]
+    # the new vertices, one per crossing edge
+    edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    signs = np.concatenate([s[:, [0, 1]], s[:, [1, 2]], s[:, [2, 0]]])
+    cut = signs[:, 0] * signs[:, 1] < 0
+    pairs = np.sort(edges[cut], axis=1)
+    unique, inverse = np.unique(pairs, axis=0, return_inverse=True)
+    u, w = vertices[unique[:, 0]], vertices[unique[:, 1]]
+    t = (plane - u[:, axis]) / (w[:, axis] - u[:, axis])
+    new = u + t[:, None] * (w - u)
+    new[:, axis] = plane
+    index = np.full(len(edges), -1, np.int64)
+    index[np.flatnonzero(cut)] = len(vertices) + inverse.reshape(-1)
+    n = len(tri)
+    m01, m12, m20 = index[:n], index[n : 2 * n], index[2 * n :]
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    on = s[:, 0] == 0
+    # a corner on the plane: (a, b, m12) and (a, m12, c)
+    two = np.concatenate([np.stack([a, b, m12], 1)[on], np.stack([a, m12, c], 1)[on]])
+    # a alone on its side: (a, m01, m20), (m01, b, c), (m01, c, m20)
+    off = ~on
+    three = np.concatenate(
+        [
+            np.stack([a, m01, m20], 1)[off],
+            np.stack([m01, b, c], 1)[off],
+            np.stack([m01, c, m20], 1)[off],
+        ]
+    )
+    kept = np.flatnonzero(~crossing)
+    return np.vstack([vertices, new]), np.vstack([cells[kept], two, three]), kept

@@ -1,0 +1,439 @@
+"""A layer's objects as tasks of arrays and scalars, which a cluster's workers can
+run: an object whole (:func:`encode_object`), a z-row of its level-0 fragments
+(:func:`encode_row`), its level 0 as one node (:func:`encode_node`), or a z-slab of
+a large object collapsed for its coarser levels (:func:`collapse_slab`), and the
+plans that put their results together (:func:`object_tasks`, :class:`Rows`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import functools
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ...atomic import DISK_FULL_ERRNOS, disk_full_error
+from ...errors import IsoconvertError, OutputError
+from ...mesh import Mesh, MeshParts, slab_split
+from .fragments import dracopy, encode_levels, encoded
+from .octree import (
+    Octree,
+    cut_level,
+    level_frame,
+    node_rows,
+    object_frame,
+    one_node,
+    row_span,
+    triangle_extents,
+)
+
+#: ``collapse(mesh, bound, locked)``: the triangles of ``mesh`` (index coordinates)
+#: collapsed to within ``bound`` of it both ways, over its vertices, ``locked``
+#: ((V,) bool or None) kept where they are (:func:`isoconvert.post.decimate.collapse`).
+Collapse = Callable[[Mesh, float, np.ndarray | None], np.ndarray]
+
+#: ``map_objects(function, tasks)``: ``function(*args)`` for each ``(what, args)`` of
+#: ``tasks`` (``what`` names the task in errors), the results in order.
+ObjectMap = Callable[[Callable[..., tuple], Iterable[tuple[str, tuple]]], Iterable]
+
+#: Triangles of an object above which its coarser levels are collapsed in z-slabs
+#: of about :data:`SLAB_TRIANGLES` each (:func:`_coarse_levels`), not whole: the
+#: bounded collapse holds about 290 bytes a triangle of its input.
+LARGE_OBJECT = 1 << 19
+SLAB_TRIANGLES = 1 << 18
+
+
+@dataclass(frozen=True)
+class Rows:
+    """An object made a z-row of level-0 nodes at a time: its octree, its rows'
+    count, and, with coarser levels, its slabs' count and what makes the levels
+    from their collapses (:func:`_coarse_fragments`)."""
+
+    shape: np.ndarray
+    grid_origin: np.ndarray
+    rows: int
+    slabs: int = 0
+    coarse: Callable[[list[tuple]], list[dict]] | None = None
+
+
+def object_tasks(
+    meshes: Mapping[int, Mesh],
+    parts: Callable[[int], MeshParts] | None,
+    plans: deque,
+    origin: np.ndarray,
+    inverse: np.ndarray,
+    lods: int,
+    bits: int,
+    chunk: float | None,
+    collapse: Collapse | None,
+) -> Iterator[tuple[int, str, Callable, tuple]]:
+    """Each object's tasks, ``(segment, what, encode, args)``, an object at a time,
+    its plan put in ``plans`` before them: ``(segment, None)`` for one
+    :func:`encode_object` task (its whole mesh), or ``(segment, Rows)`` for an
+    object given in parts that is cut into fragments with one level, or for one
+    large (:data:`LARGE_OBJECT` triangles) with more, given in parts or whole
+    (:class:`_WholeParts`): level 0 is one :func:`encode_row`
+    task per z-row of nodes its box reaches, each made of the triangles that reach
+    the row, so that no object's whole mesh is built (the same bytes, as
+    :func:`cut_level` makes each row from those triangles alone), or, held by one
+    node, one :func:`encode_node` task; then a large one's coarser levels are one
+    :func:`collapse_slab` task per z-slab of it (:func:`_coarse_levels`)."""
+    top = float(2**bits - 1)
+
+    def to_index(world: np.ndarray) -> np.ndarray:
+        return index_of(world, origin, inverse)
+
+    for key in meshes:  # a mapping that builds each mesh when asked for is asked once
+        segment = int(key)
+        mesh = pieces = None
+        if parts is not None:
+            pieces = parts(segment)
+        else:
+            mesh = meshes[key]
+            check_mesh(segment, mesh)
+            if lods > 1 and len(mesh.cells) > LARGE_OBJECT:  # coarser levels from slabs too
+                pieces = _WholeParts(mesh)
+        large = pieces is not None and lods > 1 and pieces.n_cells > LARGE_OBJECT
+        if pieces is not None and (chunk is not None or large):
+            lo, hi = pieces.extent(to_index)
+            grid_origin, shape, cut = object_frame(lo, hi, chunk)
+            if large or (cut and lods == 1):
+                frame = level_frame(grid_origin, shape, 0, top, lo, hi)
+                rows = node_rows(frame) if cut else range(1)
+                plan = Rows(shape, grid_origin, len(rows))
+                if large:  # and its slabs, collapsed for its coarser levels
+                    octree = (grid_origin, shape, top, lo, hi, cut)
+                    coarse = functools.partial(_coarse_fragments, lods, collapse, octree, bits)
+                    plan = replace(plan, slabs=-(-pieces.n_cells // SLAB_TRIANGLES), coarse=coarse)
+                plans.append((segment, plan))
+                if not cut:  # level 0 is one fragment: the whole mesh
+                    whole = pieces.whole()
+                    args = (whole.vertices, whole.cells, origin, inverse, grid_origin, shape, bits)
+                    del whole
+                    yield segment, f"object {segment}, level 0", encode_node, args
+                for row in rows if cut else ():
+                    part = pieces.reaching(to_index, *row_span(frame, row))
+                    args = (part.vertices, part.cells, origin, inverse, frame, row, bits)
+                    yield segment, f"object {segment}, z-row {row} of fragments", encode_row, args
+                for n, (slab, used, shared) in enumerate(pieces.slabs(to_index, plan.slabs)):
+                    args = (slab.vertices, slab.cells, used, shared, origin, inverse, collapse)
+                    yield segment, f"object {segment}, slab {n} of its levels", collapse_slab, args
+                continue
+        if mesh is None:
+            mesh = pieces.whole()
+            check_mesh(segment, mesh)
+        plans.append((segment, None))
+        args = (mesh.vertices, mesh.cells, origin, inverse, lods, bits, chunk, collapse)
+        yield segment, f"object {segment}", encode_object, args
+
+
+class _WholeParts:
+    """An object given whole as :class:`~isoconvert.mesh.MeshParts` (a large
+    isosurface, a post-processed label), so that its coarser levels come from
+    slabs as a label's do: each triangle's slab by its lowest corner."""
+
+    def __init__(self, mesh: Mesh) -> None:
+        self._mesh = mesh
+        self._cells = np.asarray(mesh.cells, dtype=np.int64)
+        self._low = self._high = self._box = None
+
+    @property
+    def n_cells(self) -> int:
+        return len(self._cells)
+
+    def _extents(self, to_index: Callable) -> None:
+        if self._low is None:
+            index = to_index(np.asarray(self._mesh.vertices, dtype=np.float64))
+            self._box = index.min(axis=0), index.max(axis=0)
+            self._low, self._high = triangle_extents(index, self._cells, 2)
+
+    def extent(self, to_index: Callable) -> tuple[np.ndarray, np.ndarray]:
+        self._extents(to_index)
+        return self._box
+
+    def reaching(self, to_index: Callable, low: float, high: float) -> Mesh:
+        self._extents(to_index)
+        return self._part((self._high >= low) & (self._low <= high))[0]
+
+    def slabs(
+        self, to_index: Callable, count: int
+    ) -> Iterator[tuple[Mesh, np.ndarray, np.ndarray]]:
+        self._extents(to_index)
+        order, ends, shared, base = slab_split(self._low, self._cells, count)
+        for n in range(count):
+            mesh, used = self._part(order[ends[n] : ends[n + 1]])
+            yield mesh, used, shared[used - base]
+
+    def _part(self, taken: np.ndarray) -> tuple[Mesh, np.ndarray]:
+        """The triangles ``taken`` selects, over the vertices they use, in order."""
+        used, local = np.unique(self._cells[taken], return_inverse=True)
+        return Mesh(np.asarray(self._mesh.vertices)[used], local.reshape(-1, 3)), used
+
+    def whole(self) -> Mesh:
+        return self._mesh
+
+
+def check_mesh(segment: int, mesh: Mesh) -> None:
+    cells = np.asarray(mesh.cells)
+    vertices = np.asarray(mesh.vertices)
+    if cells.ndim != 2 or cells.shape[1] != 3 or not len(cells):
+        raise IsoconvertError(f"precomputed: segment {segment} has no triangles")
+    if cells.min() < 0 or cells.max() >= len(vertices):
+        raise IsoconvertError(f"precomputed: a triangle of segment {segment} refers to no vertex")
+    if not np.isfinite(vertices).all():
+        raise IsoconvertError(f"precomputed: segment {segment} has non-finite vertices")
+
+
+def encode_object(
+    vertices: np.ndarray,
+    cells: np.ndarray,
+    origin: np.ndarray,
+    inverse: np.ndarray,
+    lods: int,
+    bits: int,
+    chunk: float | None,
+    collapse: Collapse | None,
+) -> tuple[bytes, bytes]:
+    """One object's manifest and fragment data: its levels of detail (the coarser
+    ones by ``collapse``), cut and Draco-encoded (:func:`encode_levels`). A module-level
+    function of arrays and scalars, so that a cluster's worker can run it.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+        World positions.
+    cells : (C, 3) int64
+    origin : (3,) float64
+    inverse : (3, 3) float64
+        The grid's origin and the inverse of its affine: index = inverse @ (world - origin).
+    lods, bits, chunk, collapse
+        As :func:`.layer.write_precomputed`.
+    """
+    full = Mesh(index_of(vertices, origin, inverse), np.asarray(cells, dtype=np.int64))
+    levels = [full] + [_collapsed(full, float(2 ** (k - 1)), collapse) for k in range(1, lods)]
+    return encode_levels(levels, bits, dracopy(), chunk)
+
+
+def encode_row(
+    vertices: np.ndarray,
+    cells: np.ndarray,
+    origin: np.ndarray,
+    inverse: np.ndarray,
+    frame: Octree,
+    row: int,
+    bits: int,
+) -> dict[tuple[int, int, int], bytes]:
+    """One z-row of nodes of an object's level 0, cut (:func:`cut_level`) and
+    Draco-encoded: a task of arrays and scalars, which a cluster's worker can run.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+        World positions of the triangles that reach the row (and its snapping
+        distance), in the object's order, over its vertices in theirs.
+    cells : (C, 3) int64
+    origin, inverse
+        As :func:`encode_object`.
+    frame : Octree
+        The object's level 0.
+    row : int
+    bits : int
+
+    Returns
+    -------
+    dict
+        Each node's position and its Draco fragment.
+    """
+    cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
+    level = cut_level(index_of(vertices, origin, inverse), cells, frame, [row])
+    return encoded(level, bits, dracopy())
+
+
+def encode_node(
+    vertices: np.ndarray,
+    cells: np.ndarray,
+    origin: np.ndarray,
+    inverse: np.ndarray,
+    grid_origin: np.ndarray,
+    shape: np.ndarray,
+    bits: int,
+) -> dict[tuple[int, int, int], bytes]:
+    """Level 0 of an object held by one node (its box, ``grid_origin`` and
+    ``shape``), Draco-encoded: a task of arrays and scalars, as :func:`encode_row`.
+    ``vertices`` are world positions, the rest as :func:`encode_object`'s."""
+    index = index_of(vertices, origin, inverse)
+    level = one_node(index, np.asarray(cells, np.int64), grid_origin, shape, float(2**bits - 1))
+    return encoded(level, bits, dracopy())
+
+
+def collapse_slab(
+    vertices: np.ndarray,
+    cells: np.ndarray,
+    used: np.ndarray,
+    shared: np.ndarray,
+    origin: np.ndarray,
+    inverse: np.ndarray,
+    collapse: Collapse,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One z-slab of a large object collapsed within half a unit, the first step
+    of its coarser levels (:func:`_coarse_levels`): a task of arrays and a
+    function, which a cluster's worker can run. The vertices it shares with other
+    slabs, and their neighbours, stay where they are.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+        The slab's world positions.
+    cells : (C, 3) int64
+    used : (V,) int64
+        Its vertices' ids in the object (:meth:`~isoconvert.mesh.MeshParts.slabs`).
+    shared : (V,) bool
+        Which of them other slabs use too.
+    origin, inverse
+        As :func:`encode_object`.
+    collapse : callable
+
+    Returns
+    -------
+    ids : (K,) int64
+        The ids of the vertices the collapse left.
+    positions : (K, 3) float64
+        Their index coordinates.
+    cells : (C', 3) int64
+        The collapsed triangles, over the vertices' ids.
+    """
+    index = index_of(vertices, origin, inverse)
+    local = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
+    if not len(local):
+        return used[:0], index[:0], local
+    near = shared[local].any(axis=1)
+    kept = shared.copy()
+    kept[local[near].reshape(-1)] = True
+    out = collapse(Mesh(index, local), 0.5, kept)
+    still = np.unique(out)
+    return used[still], index[still], used[out]
+
+
+def _coarse_fragments(
+    lods: int, collapse: Collapse, octree: tuple, bits: int, slabs: list[tuple]
+) -> list[dict[tuple[int, int, int], bytes]]:
+    """A large object's coarser levels from its slabs' collapses
+    (:func:`_coarse_levels`), cut and encoded (``octree``: its grid origin, finest
+    nodes' shape, ``top``, box, and whether it is cut: else each level is one
+    fragment)."""
+    grid_origin, shape, top, lo, hi, cut = octree
+    levels = []
+    for k, mesh in enumerate(_coarse_levels(slabs, lods, collapse), start=1):
+        if cut:
+            frame = level_frame(grid_origin, shape, k, top, lo, hi)
+            level = cut_level(mesh.vertices, mesh.cells, frame)
+        else:
+            level = one_node(mesh.vertices, mesh.cells, grid_origin, shape * 2.0**k, top)
+        levels.append(encoded(level, bits, dracopy()))
+    return levels
+
+
+def _coarse_levels(slabs: list[tuple], lods: int, collapse: Collapse) -> list[Mesh]:
+    """Levels 1 to ``lods - 1`` of a large object (index coordinates), never
+    collapsing its whole mesh: level 1 is collapsed in z-slabs of about
+    :data:`SLAB_TRIANGLES` triangles each, within half its bound of its slab
+    (:func:`collapse_slab`: ``slabs`` are their results; the vertices a slab shares
+    with others, and their neighbours, kept, so that the slabs still meet and no
+    two collapses join the same two shared vertices); then level k is the slabs'
+    union collapsed whole within the rest of its bound, ``2**(k - 1) - 0.5``. The
+    bounds add: level k lies within ``2**(k - 1)`` of level 0 both ways, as a
+    whole collapse's would. The union is a fraction of the object (1.5 M
+    triangles to 60k on the benchmark's bumpy ball), and collapsing level 2 from
+    it rather than from level 1 keeps a quarter fewer triangles."""
+    ids, positions, cells = zip(*slabs, strict=True)
+    # the union, over the vertices its triangles use (a shared one, in two slabs,
+    # has one position), in the order of their ids
+    every, first = np.unique(np.concatenate(ids), return_index=True)
+    union = Mesh(np.concatenate(positions)[first], np.searchsorted(every, np.concatenate(cells)))
+    return [_collapsed(union, 2.0 ** (k - 1) - 0.5, collapse) for k in range(1, lods)]
+
+
+def _collapsed(mesh: Mesh, bound: float, collapse: Collapse) -> Mesh:
+    """``mesh`` collapsed within ``bound``, its vertices those still used, in order."""
+    out = collapse(mesh, bound, None)
+    used = np.zeros(len(mesh.vertices), dtype=bool)
+    used[out.reshape(-1)] = True
+    return Mesh(np.asarray(mesh.vertices)[used], (np.cumsum(used) - 1)[out])
+
+
+def index_of(world: np.ndarray, origin: np.ndarray, inverse: np.ndarray) -> np.ndarray:
+    """Index coordinates of world points, ``inverse @ (world - origin)``, one
+    point at a time in the same operations however many are given (a matrix
+    product's kernel may sum a block's rows otherwise than a lone row's), so that
+    an object's parts get its whole mesh's coordinates to the bit.
+
+    Parameters
+    ----------
+    world : (N, 3) float64
+    origin : (3,) float64
+    inverse : (3, 3) float64
+
+    Returns
+    -------
+    (N, 3) float64
+    """
+    d = np.asarray(world, dtype=np.float64) - origin
+    return d[:, 0:1] * inverse[:, 0] + d[:, 1:2] * inverse[:, 1] + d[:, 2:3] * inverse[:, 2]
+
+
+def write_object(target: str | None, layer: str, encode: Callable, *args) -> tuple | dict:
+    """A layer's task on a cluster: ``encode(*args)``, :func:`encode_object`,
+    :func:`encode_row`, :func:`encode_node` or :func:`collapse_slab`. An object's
+    fragment data is written by the task itself to ``target`` (in the layer's part
+    folder) when it sees that folder (a file system shared with the client, as a
+    cluster's output usually is), and only the manifest and the data's size come
+    back; a task that does not see it sends the data back instead, for the client
+    to write. The others' results (``target`` None) always come back: a row's or
+    a node's fragments, to be put in the object's order, and a slab's collapse.
+
+    Parameters
+    ----------
+    target : str or None
+        The file of the object's fragment data; None: sent back.
+    layer : str
+        The layer's folder, named in errors.
+    encode : callable
+    *args
+        ``encode``'s.
+
+    Returns
+    -------
+    tuple or dict
+        An object's manifest and fragment data (bytes, or its size once written
+        to ``target``); a row's fragments by node; a slab's collapse.
+    """
+    result = encode(*args)
+    # a row, or the client's part folder not on this machine: sent back
+    if target is None or not Path(target).parent.is_dir():
+        return result
+    manifest, data = result
+    try:
+        Path(target).write_bytes(data)
+    except OSError as exc:  # the client removes the part folder on an error
+        if exc.errno in DISK_FULL_ERRNOS:
+            raise disk_full_error(layer, 0, why="while a worker wrote an object") from None
+        if isinstance(exc, PermissionError) or exc.errno == errno.EROFS:
+            # a worker of another user, or a read-only mount: the client writes it
+            with contextlib.suppress(OSError):
+                Path(target).unlink(missing_ok=True)
+            return manifest, data
+        raise OutputError(f"{layer}: a worker could not write an object ({exc.strerror})") from None
+    return manifest, len(data)
+
+
+def encode_and_write(target: str, encode: Callable, *args) -> tuple[bytes, int]:
+    """``encode(*args)`` (:func:`encode_object`), its fragment data written to
+    ``target``: the manifest and the data's size."""
+    manifest, data = encode(*args)
+    Path(target).write_bytes(data)
+    return manifest, len(data)
