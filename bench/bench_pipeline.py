@@ -37,7 +37,9 @@ the peer), beside the best and median times. The pipelines:
   triangles) to a layer of one level cut into 64-voxel fragments, within ``--max-memory
   256M`` and whole, and of 3 levels within that budget, beside the same surface as a
   PLY within it (the bound the other outputs keep) and the zmesh + cloud-volume script
-  (one legacy fragment): the peak of cutting and decimating one large object.
+  (one legacy fragment): the peak of cutting and decimating one large object; and the
+  defaults (3 levels, ``--fragment-size auto``) against one fragment a level
+  (``--fragment-size inf``), in memory and within the budget.
 - ``layer-cluster``: the same object's layer with ``--scheduler``, on a Dask cluster this
   benchmark starts (``dask scheduler`` and ``dask worker --nworkers 2 --nthreads 1`` on
   127.0.0.1), beside the same layer made in memory; the workers' peak resident size is
@@ -410,10 +412,22 @@ def one_object_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]
             [sys.executable, str(tmp / "zmesh_layer.py"), str(volume), str(tmp / "one_zl")],
         ),
     ]
+    # the defaults (3 levels, --fragment-size auto: 128-voxel nodes for an object
+    # this large) against one fragment a level (inf), in memory and within the budget
+    defaults = [*base, "--format", "precomputed"]
+    for name, extra in [("in memory", []), (f"--max-memory {LARGE_BUDGET}", budget)]:
+        commands += [
+            Command(f"isoconvert defaults, {name}", defaults + extra + ["-o", str(tmp / "one_d")]),
+            Command(
+                f"isoconvert defaults --fragment-size inf, {name}",
+                [*defaults, "--fragment-size", "inf", *extra, "-o", str(tmp / "one_i")],
+            ),
+        ]
     peer = "zmesh + cloud-volume script (legacy)"
     ply = commands[3].name
     return commands, [(commands[0].name, ply, None), (commands[2].name, ply, None),
-                      (commands[1].name, peer, None)]  # fmt: skip
+                      (commands[1].name, peer, None), (commands[5].name, commands[6].name, None),
+                      (commands[7].name, commands[8].name, None)]  # fmt: skip
 
 
 def cluster_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list, object]:

@@ -106,8 +106,9 @@ class ConvertOptions:
         Levels of detail of a precomputed layer (1: the meshes as extracted;
         None: 3, or 1 with ``legacy_mesh``).
     fragment_size : float or None
-        A precomputed layer's octree fragments, in voxels a side (None: one per
-        object and level).
+        A precomputed layer's octree fragments, in voxels a side (None: auto, 128
+        for objects of more than 524,288 triangles, one fragment a level for the
+        others; infinity: one fragment per object and level).
     sharded : bool
         A precomputed layer's objects in shard files.
     legacy_mesh : bool
@@ -149,6 +150,11 @@ class ConvertOptions:
     def layer_lods(self) -> int:
         """The precomputed layer's levels of detail, the default resolved."""
         return self.lods if self.lods is not None else (1 if self.legacy_mesh else 3)
+
+    @property
+    def layer_fragment_size(self) -> float | str:
+        """The precomputed layer's fragment size, the default (``"auto"``) resolved."""
+        return self.fragment_size if self.fragment_size is not None else "auto"
 
     def updated(self, **changes) -> ConvertOptions:
         """A copy with ``changes``; names of :class:`ReadOptions` fields go to
@@ -396,7 +402,7 @@ def _convert_levels_to_layer(
         data_type=data_type_for(len(levels)),
         lods=opts.layer_lods,
         collapse=bounded_collapse,
-        chunk=opts.fragment_size,
+        chunk=opts.layer_fragment_size,
         sharded=opts.sharded,
         legacy=opts.legacy_mesh,
         force=opts.force,

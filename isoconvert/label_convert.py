@@ -181,7 +181,7 @@ def convert_labels(
             data_type=volume_data_type(largest) if opts.with_volume else data_type_for(largest),
             lods=opts.layer_lods,
             collapse=bounded_collapse,
-            chunk=opts.fragment_size,
+            chunk=opts.layer_fragment_size,
             sharded=opts.sharded,
             legacy=opts.legacy_mesh,
             volume=volume if opts.with_volume else None,

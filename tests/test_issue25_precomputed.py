@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+import typing
 
 import numpy as np
 import pytest
@@ -395,6 +396,7 @@ def test_convert_labels_writes_a_layer_cloud_volume_reads(tmp_path, capsys):
         (["--labels", "--lods", "0"], "--lods: a precomputed layer has 1 level of detail or more"),
         (["--labels", "--single-file"], "leave out --single-file"),
         (["--labels", "--fragment-size", "0"], "--fragment-size: precomputed fragments are 1"),
+        (["--labels", "--fragment-size", "nan"], "(inf: one per object and level; auto, the"),
     ]:
         assert main(args + extra) == 1
         err = capsys.readouterr().err
@@ -565,6 +567,74 @@ def test_fragments_are_an_octree_whose_seams_stay_closed(tmp_path, labelled, siz
                 _, there, _ = trimesh.proximity.closest_point(original, union.vertices)
                 _, back_there, _ = trimesh.proximity.closest_point(union, original.vertices)
                 assert there.max() <= step and back_there.max() <= step
+
+
+def test_the_default_fragment_size_cuts_only_objects_of_many_triangles():
+    """--fragment-size auto: 128-voxel nodes above 524,288 triangles, one fragment
+    a level at or below; a number is itself; inf (or None) is never a cut; and the
+    option's help gives the same numbers."""
+    from isoconvert.cli.options import LayerArgs
+    from isoconvert.writers.precomputed.octree import AUTO_CUT, AUTO_FRAGMENT, fragment_size
+
+    assert (AUTO_CUT, AUTO_FRAGMENT) == (524_288, 128.0)
+    assert fragment_size("auto", AUTO_CUT) is None
+    assert fragment_size("auto", AUTO_CUT + 1) == AUTO_FRAGMENT
+    assert fragment_size(64.0, 10) == 64.0 and fragment_size(np.float32(5), 10**9) == 5.0
+    assert fragment_size(float("inf"), 10**9) is None and fragment_size(None, 10**9) is None
+    option = typing.get_type_hints(LayerArgs, include_extras=True)["fragment_size"]
+    help_text = " ".join(option.__metadata__[0].help.split())
+    assert f"{AUTO_CUT:,} triangles" in help_text and f"default: {AUTO_FRAGMENT:g} " in help_text
+
+
+def test_by_default_a_large_label_is_cut_into_fragments_and_a_small_one_is_not(
+    tmp_path, monkeypatch
+):
+    """The command without --fragment-size: a ball of about 170,000 triangles (more
+    than the rule's count, set to 100,000 here to keep the test small) and 136
+    voxels wide is cut into 128-voxel fragments that cloud-volume joins into its
+    closed surface at every level (level 0 its PLY's area), a small cube beside it
+    is one fragment a level, its PLY's triangles; --fragment-size inf leaves the
+    ball whole (one node, its box); the layer made in slabs within --max-memory is
+    the same."""
+    from isoconvert.cli import main
+    from isoconvert.meshfile import read_mesh
+    from isoconvert.writers.precomputed import octree
+
+    monkeypatch.setattr(octree, "AUTO_CUT", 100_000)
+    n = 150
+    z, y, x = np.ogrid[:n, :n, :n]
+    labels = (((x - 75) ** 2 + (y - 75) ** 2 + (z - 75) ** 2) < 68**2).astype(np.uint8)
+    labels[2:8, 2:8, 2:8] = 2
+    path = tmp_path / "balls.npy"
+    np.save(path, np.ascontiguousarray(labels.T))
+    common = ["convert", str(path), "--labels", "--format", "precomputed", "--lods", "2", "-q"]
+    assert main([*common, "-o", str(tmp_path / "auto")]) == 0
+    assert main([*common, "-o", str(tmp_path / "whole"), "--fragment-size", "inf"]) == 0
+    assert main([*common, "-o", str(tmp_path / "slabs"), "--max-memory", "2M"]) == 0
+    assert main(["convert", str(path), "--labels", "-q", "-o", str(tmp_path / "b.ply")]) == 0
+    ball, cube = read_mesh(tmp_path / "b_label1.ply"), read_mesh(tmp_path / "b_label2.ply")
+    assert ball.n_cells > 100_000 and cube.n_cells < 1000
+    for label in (1, 2):
+        index = f"mesh/{label}.index"
+        assert (tmp_path / "slabs" / index).read_bytes() == (tmp_path / "auto" / index).read_bytes()
+    chunk, _, n_lods, _, _, positions, _ = _manifest(tmp_path / "auto" / "mesh" / "1.index")
+    # the ball's box is 136 wide: its far 8 voxels hold caps along x, y and z only
+    assert np.allclose(chunk, 128.0) and n_lods == 2 and positions[0].shape[1] == 4
+    original = trimesh.Trimesh(ball.vertices, ball.cells)
+    cv = _cloud(tmp_path / "auto")
+    for lod in range(2):
+        back = cv.mesh.get(1, lod=lod)[1]
+        union = trimesh.Trimesh(back.vertices, back.faces, process=True)
+        assert union.is_watertight
+        if lod == 0:
+            assert len(back.faces) > ball.n_cells  # the cuts add triangles
+            assert abs(union.area / original.area - 1) < 1e-4
+    chunk, _, _, _, _, positions, _ = _manifest(tmp_path / "auto" / "mesh" / "2.index")
+    assert chunk.max() < 10 and [p.shape[1] for p in positions] == [1, 1]
+    assert len(cv.mesh.get(2, lod=0)[2].faces) == cube.n_cells
+    chunk, _, _, _, _, positions, _ = _manifest(tmp_path / "whole" / "mesh" / "1.index")
+    assert chunk.min() > 128 and [p.shape[1] for p in positions] == [1, 1]
+    assert len(_cloud(tmp_path / "whole").mesh.get(1, lod=0)[1].faces) == ball.n_cells
 
 
 @pytest.mark.parametrize("chunk", [8.0, None])

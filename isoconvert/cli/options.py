@@ -483,8 +483,9 @@ class LayerArgs:
         float | None,
         typer.Option(
             help="Cut each object of --format precomputed into fragments of this many voxels "
-            "a side (octree nodes a viewer loads one by one); default: one fragment per object "
-            "and level of detail.",
+            "a side (octree nodes a viewer loads one by one); default: 128 for objects of more "
+            "than 524,288 triangles, one fragment a level for smaller ones; inf: one fragment "
+            "per object and level of detail.",
         ),
     ] = None
     sharded: Annotated[

@@ -20,6 +20,7 @@ from ...units import meters_per_unit
 from ...volume import Volume
 from .fragments import assemble, dracopy
 from .legacy import check_legacy, write_legacy
+from .octree import AUTO_CUT, AUTO_FRAGMENT
 from .shards import ObjectSpill, sharding, write_shards
 from .tasks import (
     Collapse,
@@ -64,7 +65,7 @@ def check_layer(
     force: bool,
     lods: int,
     inputs: Sequence[str | Path] = (),
-    chunk: float | None = None,
+    chunk: float | str | None = None,
     *,
     sharded: bool = False,
     legacy: bool = False,
@@ -132,9 +133,13 @@ def _check_replaceable(folder: Path) -> None:
 
 
 def _check_chunk(chunk) -> None:
-    if chunk is not None and not (np.isfinite(chunk) and chunk >= 1):
+    if chunk is None or chunk == "auto":
+        return
+    if isinstance(chunk, str) or not (chunk >= 1):  # inf: one fragment a level
         raise IsoconvertError(
-            f"--fragment-size: precomputed fragments are 1 voxel a side or more, got {chunk}"
+            f"--fragment-size: precomputed fragments are 1 voxel a side or more (inf: one "
+            f"per object and level; auto, the default: {AUTO_FRAGMENT:g} for objects of "
+            f"more than {AUTO_CUT:,} triangles), got {chunk}"
         )
 
 
@@ -188,7 +193,7 @@ def write_precomputed(
     lods: int = 1,
     collapse: Collapse | None = None,
     bits: int = 16,
-    chunk: float | None = None,
+    chunk: float | str | None = "auto",
     sharded: bool = False,
     legacy: bool = False,
     volume: Volume | None = None,
@@ -224,9 +229,12 @@ def write_precomputed(
         collapsed in slabs (:func:`_coarse_levels`), any other whole.
     bits : int
         Vertex quantization bits, 10 or 16.
-    chunk : float or None
+    chunk : float, "auto" or None
         The octree's finest nodes, in index units (cubes): an object larger is cut
-        into fragments a viewer can load one by one. None: a fragment per level.
+        into fragments a viewer can load one by one. "auto": :data:`AUTO_FRAGMENT`
+        for objects of more than :data:`AUTO_CUT` triangles, one fragment a level
+        for the others (:func:`.octree.fragment_size`). None or infinity: one
+        fragment a level.
     sharded : bool
         Store the objects in shard files (``neuroglancer_uint64_sharded_v1``)
         instead of two files each.

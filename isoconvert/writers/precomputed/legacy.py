@@ -13,8 +13,9 @@ from ...errors import IsoconvertError
 from ...mesh import Mesh
 
 
-def check_legacy(legacy: bool, lods: int, chunk: float | None, sharded: bool) -> None:
-    if legacy and (lods > 1 or chunk is not None or sharded):
+def check_legacy(legacy: bool, lods: int, chunk: float | str | None, sharded: bool) -> None:
+    """Refuse what the legacy format cannot hold (``chunk`` None or "auto": not given)."""
+    if legacy and (lods > 1 or chunk not in (None, "auto") or sharded):
         raise IsoconvertError(
             "precomputed: the legacy mesh format has one level of detail, one fragment per "
             "object and no shards: leave out --lods, --fragment-size and --sharded with it"

@@ -15,6 +15,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: ``--fragment-size auto`` (the default): an object of more than ``AUTO_CUT``
+#: triangles (some 600 KB of Draco at level 0) is cut into nodes of
+#: ``AUTO_FRAGMENT`` voxels a side, so that a viewer loads only the parts it shows
+#: and level 0 is made a z-row of nodes at a time (a label surface has about 3.5
+#: triangles per voxel of its area: up to about 100,000 in a 128-voxel node); a
+#: smaller one is one fragment a level, which a viewer loads whole anyway (cutting
+#: adds triangles where the planes cross it, most at the coarser levels, and makes
+#: the layer larger: the 1.5 M-triangle ball of bench/RESULTS.md, 3 levels, 2.5 MB
+#: against 1.9 MB).
+AUTO_CUT = 1 << 19
+AUTO_FRAGMENT = 128.0
+
+
+def fragment_size(chunk: float | str | None, triangles: int) -> float | None:
+    """The finest nodes' side of an object of ``triangles`` triangles, None for one
+    fragment a level: ``chunk`` itself, or for ``"auto"`` the rule of
+    :data:`AUTO_CUT`; None or infinity: one fragment a level."""
+    if isinstance(chunk, str):  # "auto", checked by the layer
+        return AUTO_FRAGMENT if triangles > AUTO_CUT else None
+    if chunk is None or np.isinf(chunk):
+        return None
+    return float(chunk)
+
 
 @dataclass(frozen=True)
 class Octree:

@@ -24,6 +24,7 @@ from .fragments import dracopy, encode_levels, encoded
 from .octree import (
     Octree,
     cut_level,
+    fragment_size,
     level_frame,
     node_rows,
     object_frame,
@@ -69,7 +70,7 @@ def object_tasks(
     inverse: np.ndarray,
     lods: int,
     bits: int,
-    chunk: float | None,
+    chunk: float | str | None,
     collapse: Collapse | None,
 ) -> Iterator[tuple[int, str, Callable, tuple]]:
     """Each object's tasks, ``(segment, what, encode, args)``, an object at a time,
@@ -98,10 +99,12 @@ def object_tasks(
             check_mesh(segment, mesh)
             if lods > 1 and len(mesh.cells) > LARGE_OBJECT:  # coarser levels from slabs too
                 pieces = _WholeParts(mesh)
-        large = pieces is not None and lods > 1 and pieces.n_cells > LARGE_OBJECT
-        if pieces is not None and (chunk is not None or large):
+        triangles = pieces.n_cells if pieces is not None else len(mesh.cells)
+        size = fragment_size(chunk, triangles)
+        large = pieces is not None and lods > 1 and triangles > LARGE_OBJECT
+        if pieces is not None and (size is not None or large):
             lo, hi = pieces.extent(to_index)
-            grid_origin, shape, cut = object_frame(lo, hi, chunk)
+            grid_origin, shape, cut = object_frame(lo, hi, size)
             if large or (cut and lods == 1):
                 frame = level_frame(grid_origin, shape, 0, top, lo, hi)
                 rows = node_rows(frame) if cut else range(1)
@@ -128,7 +131,7 @@ def object_tasks(
             mesh = pieces.whole()
             check_mesh(segment, mesh)
         plans.append((segment, None))
-        args = (mesh.vertices, mesh.cells, origin, inverse, lods, bits, chunk, collapse)
+        args = (mesh.vertices, mesh.cells, origin, inverse, lods, bits, size, collapse)
         yield segment, f"object {segment}", encode_object, args
 
 
