@@ -42,7 +42,9 @@ the peer), beside the best and median times. The pipelines:
   (``--fragment-size inf``), in memory and within the budget.
 - ``layer-cluster``: the same object's layer with ``--scheduler``, on a Dask cluster this
   benchmark starts (``dask scheduler`` and ``dask worker --nworkers 2 --nthreads 1`` on
-  127.0.0.1), beside the same layer made in memory; the workers' peak resident size is
+  127.0.0.1), beside the same layer made in memory, with one level cut into 64-voxel
+  fragments and with the defaults (3 levels: the workers collapse the slabs and make the
+  coarser levels too); the workers' peak resident size is
   printed after (``getrusage`` on each worker), as the client's is by ``wait4``.
 - ``normals``: a 384^3 float32 gyroid (raw) to binary PLY with and without ``--normals``.
   Target 1.3x.
@@ -445,6 +447,16 @@ def cluster_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list, ob
         ),  # fmt: skip
         Command("isoconvert fragments 64, in memory", layer + ["-o", str(tmp / "one_m")]),
     ]
+    # the defaults (3 levels, 128-voxel fragments for this object): the workers also
+    # collapse its slabs and make its coarser levels from them
+    defaults = [exe, "convert", str(volume), "--labels", "-f", "-q", "--format", "precomputed"]
+    commands += [
+        Command(
+            "isoconvert defaults, --scheduler (2 workers)",
+            defaults + ["--scheduler", address, "-o", str(tmp / "one_cd")],
+        ),  # fmt: skip
+        Command("isoconvert defaults, in memory", defaults + ["-o", str(tmp / "one_md")]),
+    ]
 
     def workers_peak() -> None:
         from distributed import Client
@@ -454,7 +466,8 @@ def cluster_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list, ob
         text = ", ".join(f"{kib / 1024:.0f} MB" for kib in peaks.values())
         print(f"the workers' peak resident sizes: {text}")
 
-    return commands, [(commands[0].name, commands[1].name, None)], workers_peak
+    pairs = [(commands[0].name, commands[1].name, None), (commands[2].name, commands[3].name, None)]
+    return commands, pairs, workers_peak
 
 
 def _peak_kib() -> int:

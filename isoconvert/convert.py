@@ -444,27 +444,41 @@ def layer_objects_on(opts: ConvertOptions, source: str):
     decimated, everything Draco-encoded and the fragments written by a worker, the
     manifest sent back and written here, in order), or, for a label cut into
     fragments from its parts, each z-row of its level-0 fragments is (the fragments
-    sent back; a large label's coarser levels are made here, in slabs); otherwise
-    None, here."""
+    sent back), and so are a large label's slabs, collapsed, and its coarser levels
+    made from them (the slabs' results go from worker to worker); otherwise None,
+    here."""
     address = opts.blocks.scheduler
     if address is None:
         return None
     import uuid
 
-    from .runner import Task, run_in_order
+    from .runner import Earlier, Task, run_in_order
+    from .writers.precomputed import Preceding
 
     token = uuid.uuid4().hex[:12]
+
+    def key(n: int) -> str:
+        return f"isoconvert-object-{token}-{n}"
 
     def on_cluster(function, layer_tasks):
         tasks = (
             Task(
                 _object_task,
-                (function, *args),
-                key=f"isoconvert-object-{token}-{n}",
+                (
+                    function,
+                    *(
+                        Earlier(tuple(key(m) for m in range(n - a.count, n)))
+                        if isinstance(a, Preceding)
+                        else a
+                        for a in args
+                    ),
+                ),
+                key=key(n),
                 what=f"{source}: {what}",
                 nbytes=sum(a.nbytes for a in args if isinstance(a, np.ndarray)),
+                kept=kept,
             )
-            for n, (what, args) in enumerate(layer_tasks, start=1)
+            for n, (what, args, kept) in enumerate(layer_tasks, start=1)
         )
         return run_in_order(
             address,
@@ -483,9 +497,13 @@ def layer_objects_on(opts: ConvertOptions, source: str):
 
 def _object_task(function, *args):
     """A layer's object as a cluster's task: ``function(*args)``, or the
-    ``TaskFailure`` of a user's error (never retried)."""
-    from .runner import TaskFailure
+    ``TaskFailure`` of a user's error (never retried), also one of the earlier
+    tasks whose results it takes."""
+    from .runner import TaskFailure, failure_among
 
+    earlier = failure_among(args)
+    if earlier is not None:
+        return earlier
     try:
         return function(*args)
     except IsoconvertError as exc:

@@ -712,14 +712,92 @@ def test_one_cut_level_is_encoded_on_the_workers_a_row_of_fragments_per_task(
     assert _layer_files(tmp_path / "there") == _layer_files(tmp_path / "here")
 
 
+def _sum_of(values: list) -> float:
+    return float(sum(v.sum() for v in values))
+
+
+def _earlier_run(address: str, tasks: list) -> list:
+    from isoconvert.runner import run_in_order
+
+    return list(run_in_order(address, tasks, budget=1 << 30, died=lambda task: "died"))
+
+
+def test_a_kept_tasks_value_goes_to_the_task_that_names_it_not_here(address):
+    """Tasks kept for a later one's Earlier argument: None comes back in their
+    place, the later task gets their values (arrays made on the workers) in the
+    order it names them, and a key taken twice is refused."""
+    from isoconvert.runner import Earlier, Task
+
+    tasks = [
+        Task(np.full, ((1000,), 1.0), key="kept-a", kept=True),
+        Task(np.full, ((10,), 3.0), key="kept-b", kept=True),
+        Task(np.arange, (4,), key="plain"),
+        Task(_sum_of, (Earlier(("kept-b", "kept-a")),), key="sum"),
+    ]
+    values = _earlier_run(address, tasks)
+    assert values[:2] == [None, None] and values[2].tolist() == [0, 1, 2, 3]
+    assert values[3] == 1000.0 + 30.0
+    again = [Task(np.ones, (3,), key="kept-c", kept=True)]
+    again += [Task(_sum_of, (Earlier(("kept-c",)),), key=f"twice-{n}") for n in range(2)]
+    with pytest.raises(KeyError):
+        _earlier_run(address, again)
+
+
+def _refusing_collapse(mesh, bound, locked=None):
+    """A collapse that refuses a slab (one with locked vertices) as a user's error."""
+    if locked is not None:
+        raise IsoconvertError("the slab's collapse refused it")
+    return np.asarray(mesh.cells)
+
+
+def test_a_slabs_error_on_the_cluster_is_its_one_line_and_nothing_is_written(
+    address, monkeypatch, tmp_path
+):
+    """A large object's slab that fails with a user's error on a worker: its
+    message from the task of the coarser levels it was kept for, no folder left."""
+    pytest.importorskip("DracoPy")
+    import trimesh
+
+    from isoconvert.convert import layer_objects_on
+    from isoconvert.mesh import Mesh
+    from isoconvert.writers.precomputed import tasks as precomputed
+    from isoconvert.writers.precomputed import write_precomputed
+
+    monkeypatch.setattr(precomputed, "LARGE_OBJECT", 1000)
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=20.0)
+    meshes = {1: Mesh(sphere.vertices + 30.0, sphere.faces.astype(np.int64))}
+    grid = {"shape": (64, 64, 64), "origin": (0.0, 0.0, 0.0), "affine": np.eye(3)}
+    on_cluster = layer_objects_on(ConvertOptions(blocks=Blocks(scheduler=address)), "ball")
+    with pytest.raises(IsoconvertError, match="^the slab's collapse refused it$"):
+        write_precomputed(
+            tmp_path / "layer", meshes, grid, lods=2, collapse=_refusing_collapse,
+            map_objects=on_cluster,
+        )  # fmt: skip
+    assert list(tmp_path.iterdir()) == []
+
+
+def _note_coarse(marker: str, function, *args):
+    """A layer's task that notes its encoder and, for a large object's coarser
+    levels, how many slabs' collapses it was given (each a tuple, here)."""
+    from isoconvert.convert import _object_task
+
+    encoder = getattr(args[2], "func", args[2])
+    given = args[3] if encoder.__name__ == "_coarse_fragments" else ()
+    assert all(isinstance(slab, tuple) for slab in given)
+    with open(marker, "a") as f:
+        f.write(f"{encoder.__name__};{len(given)}\n")
+    return _object_task(function, *args)
+
+
 @pytest.mark.parametrize("fragments", [4.0, None])
 def test_large_objects_coarser_levels_are_the_same_in_memory_in_slabs_and_on_the_cluster(
     address, monkeypatch, tmp_path, fragments
 ):
     """Objects above LARGE_OBJECT triangles get their coarser levels from slabs of
     their surface (the others whole), cut into fragments or not: the same layer in
-    memory, read in slabs, and on the cluster (whose workers collapse the slabs
-    and make level 0, a row at a time when it is cut)."""
+    memory, read in slabs, and on the cluster (whose workers collapse the slabs,
+    make level 0, a row at a time when it is cut, and the coarser levels from the
+    slabs' collapses, one task an object, which the client neither makes nor sees)."""
     pytest.importorskip("DracoPy")
     pytest.importorskip("meshoptimizer")
     from isoconvert.label_convert import convert_labels
@@ -735,10 +813,21 @@ def test_large_objects_coarser_levels_are_the_same_in_memory_in_slabs_and_on_the
     np.save(tmp_path / "atlas.npy", _atlas())
     options = {"format": "precomputed", "lods": 2, "fragment_size": fragments}
     runs = {"memory": Blocks(), "slabs": Blocks(size=7), "cluster": Blocks(scheduler=address)}
+    marker = tmp_path / "tasks"
+    convert_module = sys.modules["isoconvert.convert"]
     for name, blocks in runs.items():
+        if name == "cluster":
+            monkeypatch.setattr(
+                convert_module, "_object_task", functools.partial(_note_coarse, str(marker))
+            )
         convert_labels(tmp_path / "atlas.npy", tmp_path / name, blocks=blocks, **options)
-    # the 6 labels: 340 to 3,788 triangles, 4 of them above 1,000, in 2 to 7 slabs
-    assert len(slabbed) == 3 * 4 and min(len(slabs) for slabs in slabbed) >= 2
+    # the 6 labels: 340 to 3,788 triangles, 4 of them above 1,000, in 2 to 7 slabs,
+    # their coarser levels made here in memory and in slabs, by a worker on the cluster
+    assert len(slabbed) == 2 * 4 and min(len(slabs) for slabs in slabbed) >= 2
+    there = [line.split(";") for line in marker.read_text().splitlines()]
+    coarse = [int(n) for name, n in there if name == "_coarse_fragments"]
+    assert coarse == [len(slabs) for slabs in slabbed[:4]]
+    assert sum(name == "collapse_slab" for name, _ in there) == sum(coarse)
     assert _layer_files(tmp_path / "slabs") == _layer_files(tmp_path / "memory")
     assert _layer_files(tmp_path / "cluster") == _layer_files(tmp_path / "memory")
 

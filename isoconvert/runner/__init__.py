@@ -29,7 +29,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
-from .tasks import MEMORY_HINT, Finished, Task, TaskFailure, worker_threads
+from .tasks import MEMORY_HINT, Earlier, Finished, Task, TaskFailure, failure_among, worker_threads
 
 
 def cluster_size(address: str) -> int:
@@ -64,6 +64,8 @@ def run_in_order(
     tasks : iterable of Task
         Taken one at a time as room opens: a bounded window in flight, and at
         most ``budget`` bytes of their :attr:`Task.nbytes` (at least two tasks).
+        A task's :class:`Earlier` argument becomes the values of the kept tasks
+        it names, which run before it and whose values never come here.
     budget : int
     died : callable
         The message of a task whose workers kept dying.
@@ -92,10 +94,12 @@ def run_in_order(
 
 __all__ = [
     "MEMORY_HINT",
+    "Earlier",
     "Finished",
     "Task",
     "TaskFailure",
     "cluster_size",
+    "failure_among",
     "run_in_order",
     "worker_threads",
 ]

@@ -35,7 +35,7 @@ from concurrent.futures import CancelledError
 from typing import TYPE_CHECKING, Any
 
 from ..errors import IsoconvertError, extra_hint, one_line
-from .tasks import MEMORY_HINT, Finished, Task, TaskFailure, worker_threads
+from .tasks import MEMORY_HINT, Earlier, Finished, Task, TaskFailure, worker_threads
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -396,6 +396,7 @@ def run_in_order(
 def _in_order(client, watch, address, upcoming, budget, died, memory_hint) -> Iterator[Any]:
     window = window_size(cluster_threads(client))
     in_flight: deque = deque()  # (future, task, bytes held)
+    kept: dict[str, Any] = {}  # kept tasks' futures, until a later task takes them
     sent = 0
     following = next(upcoming, None)
     try:
@@ -404,15 +405,27 @@ def _in_order(client, watch, address, upcoming, budget, died, memory_hint) -> It
                 size = following.nbytes
                 if len(in_flight) >= 2 and sent + size > budget:
                     break
-                args = following.arguments()
+                # an Earlier argument: the futures themselves, which the scheduler
+                # resolves on the worker (their values never come here)
+                args = tuple(
+                    [kept.pop(key) for key in a.keys] if isinstance(a, Earlier) else a
+                    for a in following.arguments()
+                )
                 future = watch.track(_submit(client, following, args))
                 del args
+                if following.kept:
+                    kept[following.key] = future
                 in_flight.append((future, following, size))
                 sent += size
                 following = next(upcoming, None)
             future, task, size = in_flight[0]
             watch.until_done(future)
             in_flight.popleft()
+            if task.kept and future.status == "finished":  # its value stays there
+                sent -= size
+                del future
+                yield None
+                continue
             result = _task_result(future, address, task.what, memory_hint)
             if result is _DIED:
                 raise IsoconvertError(died(task))
@@ -422,7 +435,7 @@ def _in_order(client, watch, address, upcoming, budget, died, memory_hint) -> It
             del future
             yield result
     finally:
-        _cancel(client, [f for f, _, _ in in_flight])
+        _cancel(client, [f for f, _, _ in in_flight] + list(kept.values()))
 
 
 def run_as_completed(

@@ -45,6 +45,10 @@ class Task:
     item : object
         The caller's own record of the task (a block job, a file job),
         handed back in :class:`Finished`; never sent.
+    kept : bool
+        Its value is only an argument of a later task (:class:`Earlier`): on a
+        cluster it stays on the workers and goes from one to the other, and the
+        run gives None in its place (an error of the task is still raised).
     """
 
     function: Callable[..., Any]
@@ -54,10 +58,31 @@ class Task:
     nbytes: int = 0
     load: Callable[[], tuple] | None = None
     item: Any = None
+    kept: bool = False
 
     def arguments(self) -> tuple:
         """The arguments to send: ``load()`` when given, else ``args``."""
         return self.load() if self.load is not None else self.args
+
+
+@dataclass(frozen=True)
+class Earlier:
+    """An argument of a task: the values of the earlier tasks ``keys`` (each
+    :attr:`Task.kept`, named once), as a list. A task given the
+    :class:`TaskFailure` of one of them returns it (see :func:`failure_among`)."""
+
+    keys: tuple[str, ...]
+
+
+def failure_among(args: tuple) -> TaskFailure | None:
+    """The first :class:`TaskFailure` among the values an :class:`Earlier`
+    argument became (lists in ``args``), or None."""
+    for arg in args:
+        if isinstance(arg, list):
+            for value in arg:
+                if isinstance(value, TaskFailure):
+                    return value
+    return None
 
 
 @dataclass
@@ -131,4 +156,12 @@ def worker_threads() -> int:
     return max(1, min(kernel_threads(), available_cpus() // max(1, int(slots))))
 
 
-__all__ = ["MEMORY_HINT", "Finished", "Task", "TaskFailure", "worker_threads"]
+__all__ = [
+    "MEMORY_HINT",
+    "Earlier",
+    "Finished",
+    "Task",
+    "TaskFailure",
+    "failure_among",
+    "worker_threads",
+]

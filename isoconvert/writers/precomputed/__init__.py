@@ -81,6 +81,7 @@ from .shards import object_file
 from .tasks import (
     Collapse,
     ObjectMap,
+    Preceding,
     collapse_slab,
     encode_node,
     encode_object,
@@ -93,6 +94,7 @@ __all__ = [
     "QUANTIZATION_BITS",
     "Collapse",
     "ObjectMap",
+    "Preceding",
     "check_layer",
     "collapse_slab",
     "data_type_for",

@@ -27,6 +27,7 @@ from .tasks import (
     ObjectMap,
     Rows,
     check_mesh,
+    collapse_slab,
     encode_and_write,
     encode_object,
     object_tasks,
@@ -252,11 +253,13 @@ def write_precomputed(
         Receives notes.
     map_objects : callable or None
         ``map_objects(write_object, tasks)``: ``write_object(*args)`` for each
-        ``(what, args)`` of ``tasks`` (an iterable; ``what``, such as "object 3",
-        names the task in errors), the results in their order; where the objects
-        (or, with ``parts``, their rows of fragments) are encoded (a Dask cluster's
-        workers, say). None: here, objects side by side on threads when there are
-        coarser levels to decimate.
+        ``(what, args, kept)`` of ``tasks`` (an iterable; ``what``, such as "object
+        3", names the task in errors), the results in their order (a ``kept`` one's
+        is a later task's :class:`~.tasks.Preceding` argument alone); where the
+        objects (or, with ``parts``, their rows of fragments, and a large object's
+        slabs and coarser levels) are encoded (a Dask cluster's workers, say).
+        None: here, objects side by side on threads when there are coarser levels
+        to decimate.
     object_threads : int or None
         Objects encoded here at once; None: as many as the kernels' threads when
         there are coarser levels to decimate (each holds its object's collapses),
@@ -355,7 +358,12 @@ def write_precomputed(
                 spill = stack.enter_context(ObjectSpill(work / "mesh"))
             where = work / "mesh" if spill is None else spill.fragments
             plans: deque[tuple[int, Rows | None]] = deque()
-            jobs = object_tasks(meshes, parts, plans, origin, inverse, lods, bits, chunk, collapse)
+            # on a cluster, a large object's coarser levels are made by a task too,
+            # from its slabs' collapses, which go there from the workers
+            elsewhere = map_objects is not None
+            jobs = object_tasks(
+                meshes, parts, plans, origin, inverse, lods, bits, chunk, collapse, elsewhere
+            )
             if map_objects is None:
                 # objects side by side: the coarser levels' collapses are most of the
                 # work, and their kernels leave the interpreter free (one level:
@@ -378,7 +386,7 @@ def write_precomputed(
                 # elsewhere (a cluster's workers): each object's task writes its
                 # fragments into the part folder itself when it sees it, and only
                 # the manifest comes back (see write_object); a row's fragments and
-                # a slab's collapse come back, to be put together here
+                # a large object's coarser levels come back, to be put together here
                 done = map_objects(
                     write_object,
                     (
@@ -390,6 +398,7 @@ def write_precomputed(
                                 encode,
                                 *args,
                             ),
+                            encode is collapse_slab,
                         )
                         for segment, what, encode, args in jobs
                     ),
@@ -407,7 +416,10 @@ def write_precomputed(
                     for fragments in [first, *(next(done) for _ in range(plan.rows - 1))]:
                         level.update(fragments)
                     slabs = [next(done) for _ in range(plan.slabs)]
-                    coarser = plan.coarse(slabs) if plan.coarse is not None else []
+                    if plan.elsewhere:  # the slabs went to the task after them
+                        coarser = next(done)
+                    else:
+                        coarser = plan.coarse(slabs) if plan.coarse is not None else []
                     manifest, data = assemble([level, *coarser], plan.shape, plan.grid_origin)
                 written = isinstance(data, int)  # its size: the task wrote the data
                 if spec is None:

@@ -38,9 +38,12 @@ from .octree import (
 #: ((V,) bool or None) kept where they are (:func:`isoconvert.post.decimate.collapse`).
 Collapse = Callable[[Mesh, float, np.ndarray | None], np.ndarray]
 
-#: ``map_objects(function, tasks)``: ``function(*args)`` for each ``(what, args)`` of
-#: ``tasks`` (``what`` names the task in errors), the results in order.
-ObjectMap = Callable[[Callable[..., tuple], Iterable[tuple[str, tuple]]], Iterable]
+#: ``map_objects(function, tasks)``: ``function(*args)`` for each ``(what, args,
+#: kept)`` of ``tasks`` (``what`` names the task in errors), the results in order. A
+#: :class:`Preceding` argument stands for the results of the tasks just before, each
+#: ``kept``: those are the later task's alone (on a cluster they go from worker to
+#: worker), and the map may give None in their place.
+ObjectMap = Callable[[Callable[..., tuple], Iterable[tuple[str, tuple, bool]]], Iterable]
 
 #: Triangles of an object above which its coarser levels are collapsed in z-slabs
 #: of about :data:`SLAB_TRIANGLES` each (:func:`_coarse_levels`), not whole: the
@@ -50,16 +53,26 @@ SLAB_TRIANGLES = 1 << 18
 
 
 @dataclass(frozen=True)
+class Preceding:
+    """An argument of a layer's task (see :data:`ObjectMap`): the results of the
+    ``count`` tasks just before it, as a list."""
+
+    count: int
+
+
+@dataclass(frozen=True)
 class Rows:
     """An object made a z-row of level-0 nodes at a time: its octree, its rows'
     count, and, with coarser levels, its slabs' count and what makes the levels
-    from their collapses (:func:`_coarse_fragments`)."""
+    from their collapses (:func:`_coarse_fragments`), here or (``elsewhere``) as
+    one more task after the slabs', which takes their results."""
 
     shape: np.ndarray
     grid_origin: np.ndarray
     rows: int
     slabs: int = 0
     coarse: Callable[[list[tuple]], list[dict]] | None = None
+    elsewhere: bool = False
 
 
 def object_tasks(
@@ -72,6 +85,7 @@ def object_tasks(
     bits: int,
     chunk: float | str | None,
     collapse: Collapse | None,
+    coarse_elsewhere: bool = False,
 ) -> Iterator[tuple[int, str, Callable, tuple]]:
     """Each object's tasks, ``(segment, what, encode, args)``, an object at a time,
     its plan put in ``plans`` before them: ``(segment, None)`` for one
@@ -83,7 +97,9 @@ def object_tasks(
     the row, so that no object's whole mesh is built (the same bytes, as
     :func:`cut_level` makes each row from those triangles alone), or, held by one
     node, one :func:`encode_node` task; then a large one's coarser levels are one
-    :func:`collapse_slab` task per z-slab of it (:func:`_coarse_levels`)."""
+    :func:`collapse_slab` task per z-slab of it (:func:`_coarse_levels`), and with
+    ``coarse_elsewhere`` one task more that makes them from the slabs' results
+    (a :class:`Preceding` argument; else they are made where the results come)."""
     top = float(2**bits - 1)
 
     def to_index(world: np.ndarray) -> np.ndarray:
@@ -112,7 +128,8 @@ def object_tasks(
                 if large:  # and its slabs, collapsed for its coarser levels
                     octree = (grid_origin, shape, top, lo, hi, cut)
                     coarse = functools.partial(_coarse_fragments, lods, collapse, octree, bits)
-                    plan = replace(plan, slabs=-(-pieces.n_cells // SLAB_TRIANGLES), coarse=coarse)
+                    slabs = -(-pieces.n_cells // SLAB_TRIANGLES)
+                    plan = replace(plan, slabs=slabs, coarse=coarse, elsewhere=coarse_elsewhere)
                 plans.append((segment, plan))
                 if not cut:  # level 0 is one fragment: the whole mesh
                     whole = pieces.whole()
@@ -126,6 +143,9 @@ def object_tasks(
                 for n, (slab, used, shared) in enumerate(pieces.slabs(to_index, plan.slabs)):
                     args = (slab.vertices, slab.cells, used, shared, origin, inverse, collapse)
                     yield segment, f"object {segment}, slab {n} of its levels", collapse_slab, args
+                if plan.elsewhere:
+                    what = f"object {segment}, its coarser levels"
+                    yield segment, what, plan.coarse, (Preceding(plan.slabs),)
                 continue
         if mesh is None:
             mesh = pieces.whole()
@@ -391,13 +411,15 @@ def index_of(world: np.ndarray, origin: np.ndarray, inverse: np.ndarray) -> np.n
 
 def write_object(target: str | None, layer: str, encode: Callable, *args) -> tuple | dict:
     """A layer's task on a cluster: ``encode(*args)``, :func:`encode_object`,
-    :func:`encode_row`, :func:`encode_node` or :func:`collapse_slab`. An object's
+    :func:`encode_row`, :func:`encode_node`, :func:`collapse_slab` or a large
+    object's coarser levels from its slabs' (:func:`_coarse_fragments`). An object's
     fragment data is written by the task itself to ``target`` (in the layer's part
     folder) when it sees that folder (a file system shared with the client, as a
     cluster's output usually is), and only the manifest and the data's size come
     back; a task that does not see it sends the data back instead, for the client
     to write. The others' results (``target`` None) always come back: a row's or
-    a node's fragments, to be put in the object's order, and a slab's collapse.
+    a node's fragments, to be put in the object's order, the coarser levels' (a
+    slab's collapse goes to the task that makes them).
 
     Parameters
     ----------
@@ -411,9 +433,10 @@ def write_object(target: str | None, layer: str, encode: Callable, *args) -> tup
 
     Returns
     -------
-    tuple or dict
+    tuple, dict or list
         An object's manifest and fragment data (bytes, or its size once written
-        to ``target``); a row's fragments by node; a slab's collapse.
+        to ``target``); a row's fragments by node; a slab's collapse; the coarser
+        levels' fragments by node, a dict a level.
     """
     result = encode(*args)
     # a row, or the client's part folder not on this machine: sent back
