@@ -105,8 +105,8 @@ class ConvertOptions:
     lods : int or None
         Levels of detail of a precomputed layer (1: the meshes as extracted;
         None: 3, or 1 with ``legacy_mesh``).
-    fragment_size : float or None
-        A precomputed layer's octree fragments, in voxels a side (None: auto, 128
+    fragment_size : float, "auto" or None
+        A precomputed layer's octree fragments, in voxels a side (None or "auto": 128
         for objects of more than 524,288 triangles, one fragment a level for the
         others; infinity: one fragment per object and level).
     sharded : bool
@@ -141,7 +141,7 @@ class ConvertOptions:
     background: int = 0
     label_smoothing: int | None = None
     lods: int | None = None
-    fragment_size: float | None = None
+    fragment_size: float | str | None = None
     sharded: bool = False
     legacy_mesh: bool = False
     with_volume: bool = False

@@ -586,6 +586,10 @@ def test_the_default_fragment_size_cuts_only_objects_of_many_triangles():
     assert f"{AUTO_CUT:,} triangles" in help_text and f"default: {AUTO_FRAGMENT:g} " in help_text
 
 
+def _layer_bytes(folder) -> dict:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
 def test_by_default_a_large_label_is_cut_into_fragments_and_a_small_one_is_not(
     tmp_path, monkeypatch
 ):
@@ -595,7 +599,8 @@ def test_by_default_a_large_label_is_cut_into_fragments_and_a_small_one_is_not(
     closed surface at every level (level 0 its PLY's area), a small cube beside it
     is one fragment a level, its PLY's triangles; --fragment-size inf leaves the
     ball whole (one node, its box); the layer made in slabs within --max-memory is
-    the same."""
+    the same, and so is the one of --fragment-size auto said (a word else is a
+    command line that cannot be parsed)."""
     from isoconvert.cli import main
     from isoconvert.meshfile import read_mesh
     from isoconvert.writers.precomputed import octree
@@ -611,6 +616,9 @@ def test_by_default_a_large_label_is_cut_into_fragments_and_a_small_one_is_not(
     assert main([*common, "-o", str(tmp_path / "auto")]) == 0
     assert main([*common, "-o", str(tmp_path / "whole"), "--fragment-size", "inf"]) == 0
     assert main([*common, "-o", str(tmp_path / "slabs"), "--max-memory", "2M"]) == 0
+    assert main([*common, "-o", str(tmp_path / "said"), "--fragment-size", "Auto"]) == 0
+    assert _layer_bytes(tmp_path / "said") == _layer_bytes(tmp_path / "auto")
+    assert main([*common, "-o", str(tmp_path / "word"), "--fragment-size", "big"]) == 2
     assert main(["convert", str(path), "--labels", "-q", "-o", str(tmp_path / "b.ply")]) == 0
     ball, cube = read_mesh(tmp_path / "b_label1.ply"), read_mesh(tmp_path / "b_label2.ply")
     assert ball.n_cells > 100_000 and cube.n_cells < 1000

@@ -85,6 +85,18 @@ def _check_levels(values: list[str] | None) -> list[str] | None:
     return values
 
 
+def _fragment_size(text: str | None) -> float | str | None:
+    """--fragment-size: a number of voxels (inf included) or 'auto' (the default);
+    a word is a command line that cannot be parsed (exit 2). The layer checks the
+    number's range."""
+    if text is None or text.strip().lower() == "auto":
+        return None if text is None else "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise typer.BadParameter(f"a number of voxels, 'auto' or 'inf', got {text!r}") from None
+
+
 LevelOpt = Annotated[
     list[str] | None,
     typer.Option(
@@ -480,8 +492,10 @@ class LayerArgs:
         ),
     ] = None
     fragment_size: Annotated[
-        float | None,
+        str | None,
         typer.Option(
+            metavar="<voxels|auto|inf>",
+            callback=_fragment_size,
             help="Cut each object of --format precomputed into fragments of this many voxels "
             "a side (octree nodes a viewer loads one by one); default: 128 for objects of more "
             "than 524,288 triangles, one fragment a level for smaller ones; inf: one fragment "
