@@ -443,9 +443,10 @@ def layer_objects_on(opts: ConvertOptions, source: str):
     with ``--scheduler``, each object is one task of the cluster (its coarser levels
     decimated, everything Draco-encoded and the fragments written by a worker, the
     manifest sent back and written here, in order), or, for a label cut into
-    fragments from its parts, each z-row of its level-0 fragments is (the fragments
-    sent back), and so are a large label's slabs, collapsed, and its coarser levels
-    made from them (the slabs' results go from worker to worker); otherwise None,
+    fragments from its parts, each z-row of its level-0 fragments is, and so are a
+    large label's slabs, collapsed, its coarser levels made from them, and a last
+    task that puts the label together and writes it (the others' results go to it
+    from worker to worker, and only the manifest comes back); otherwise None,
     here."""
     address = opts.blocks.scheduler
     if address is None:
@@ -467,7 +468,7 @@ def layer_objects_on(opts: ConvertOptions, source: str):
                 (
                     function,
                     *(
-                        Earlier(tuple(key(m) for m in range(n - a.count, n)))
+                        Earlier(tuple(key(m) for m in range(n - a.skip - a.count, n - a.skip)))
                         if isinstance(a, Preceding)
                         else a
                         for a in args

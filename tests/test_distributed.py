@@ -661,14 +661,18 @@ def test_layer_objects_are_encoded_and_written_by_the_workers(
 
 
 def _note_encoder(marker: str, function, *args):
-    """A layer's task that notes which encoder it ran, how many triangles it got,
+    """A layer's task that notes which encoder it ran, how many triangles it got
+    (an object put together from rows: how many rows' fragments, each a dict),
     and (a row's) the object's box it was one row of."""
     from isoconvert.convert import _object_task
 
     encoder = getattr(args[2], "__name__", "an object's arrays")
     box = args[7].lo.tolist() if encoder == "encode_row" else None
+    if encoder == "assemble_object":
+        assert all(isinstance(row, dict) for row in args[3])
+    count = len(args[3] if encoder == "assemble_object" else args[4])
     with open(marker, "a") as f:
-        f.write(f"{encoder};{len(args[4])};{box}\n")
+        f.write(f"{encoder};{count};{box}\n")
     return _object_task(function, *args)
 
 
@@ -678,8 +682,9 @@ def test_one_cut_level_is_encoded_on_the_workers_a_row_of_fragments_per_task(
 ):
     """With a scheduler, a label layer of one level cut into fragments: each task
     is one z-row of one label's fragments, made of the triangles reaching it (no
-    task gets a whole label, and the client builds none), and the layer is the
-    one written here, byte for byte."""
+    task gets a whole label, and the client builds none), then one task a label
+    is given its rows' fragments (from the workers) and writes it, and the layer
+    is the one written here, byte for byte."""
     pytest.importorskip("DracoPy")
     from isoconvert.extract.labels import LabelMeshes, label_surfaces
     from isoconvert.label_convert import convert_labels
@@ -701,11 +706,12 @@ def test_one_cut_level_is_encoded_on_the_workers_a_row_of_fragments_per_task(
     convert_labels(tmp_path / "atlas.npy", tmp_path / "there", blocks=blocks, **options)
     assert built == []
     tasks = [line.split(";") for line in marker.read_text().splitlines()]
-    assert {encoder for encoder, _, _ in tasks} == {"encode_row"}
+    assert {encoder for encoder, _, _ in tasks} == {"encode_row", "assemble_object"}
     rows: dict[str, list[int]] = {}  # each label's rows' triangles, labels in order
-    for _, n, box in tasks:
+    for _, n, box in (task for task in tasks if task[0] == "encode_row"):
         rows.setdefault(box, []).append(int(n))
-    assert len(rows) == len(triangles)
+    assembled = [int(n) for encoder, n, _ in tasks if encoder == "assemble_object"]
+    assert len(rows) == len(triangles) and assembled == [len(r) for r in rows.values()]
     for (label, count), taken in zip(triangles.items(), rows.values(), strict=True):
         # several rows, none with every triangle, each triangle in one at least
         assert len(taken) > 1 and max(taken) < count <= sum(taken), label

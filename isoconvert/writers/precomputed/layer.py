@@ -18,7 +18,7 @@ from ...mesh import Mesh, MeshParts
 from ...threads import kernel_threads, threaded_in_order
 from ...units import meters_per_unit
 from ...volume import Volume
-from .fragments import assemble, dracopy
+from .fragments import dracopy
 from .legacy import check_legacy, write_legacy
 from .octree import AUTO_CUT, AUTO_FRAGMENT
 from .shards import ObjectSpill, sharding, write_shards
@@ -26,8 +26,8 @@ from .tasks import (
     Collapse,
     ObjectMap,
     Rows,
+    assemble_object,
     check_mesh,
-    collapse_slab,
     encode_and_write,
     encode_object,
     object_tasks,
@@ -358,8 +358,8 @@ def write_precomputed(
                 spill = stack.enter_context(ObjectSpill(work / "mesh"))
             where = work / "mesh" if spill is None else spill.fragments
             plans: deque[tuple[int, Rows | None]] = deque()
-            # on a cluster, a large object's coarser levels are made by a task too,
-            # from its slabs' collapses, which go there from the workers
+            # on a cluster, an object made in rows is put together by a task too,
+            # given its rows' fragments and its slabs' collapses by the workers
             elsewhere = map_objects is not None
             jobs = object_tasks(
                 meshes, parts, plans, origin, inverse, lods, bits, chunk, collapse, elsewhere
@@ -383,22 +383,23 @@ def write_precomputed(
                 )
                 stack.callback(done.close)
             else:
-                # elsewhere (a cluster's workers): each object's task writes its
-                # fragments into the part folder itself when it sees it, and only
-                # the manifest comes back (see write_object); a row's fragments and
-                # a large object's coarser levels come back, to be put together here
+                writing = (encode_object, assemble_object)
+                # elsewhere (a cluster's workers): each object's task (or the last
+                # of an object made in rows, which the others' results go to) writes
+                # its fragments into the part folder itself when it sees it, and only
+                # the manifest comes back (see write_object)
                 done = map_objects(
                     write_object,
                     (
                         (
                             what,
                             (
-                                str(where / str(segment)) if encode is encode_object else None,
+                                str(where / str(segment)) if encode in writing else None,
                                 str(folder),
                                 encode,
                                 *args,
                             ),
-                            encode is collapse_slab,
+                            encode not in writing,
                         )
                         for segment, what, encode, args in jobs
                     ),
@@ -411,16 +412,17 @@ def write_precomputed(
                 segment, plan = plans.popleft()
                 if plan is None:
                     manifest, data = first
-                else:
-                    level: dict = {}
-                    for fragments in [first, *(next(done) for _ in range(plan.rows - 1))]:
-                        level.update(fragments)
+                elif plan.elsewhere:  # the tasks before the last are kept there
+                    kept = plan.rows + plan.slabs + (plan.coarse is not None)
+                    for _ in range(kept - 1):
+                        next(done)
+                    manifest, data = next(done)
+                else:  # put together here, as the last task does there
+                    rows = [first, *(next(done) for _ in range(plan.rows - 1))]
                     slabs = [next(done) for _ in range(plan.slabs)]
-                    if plan.elsewhere:  # the slabs went to the task after them
-                        coarser = next(done)
-                    else:
-                        coarser = plan.coarse(slabs) if plan.coarse is not None else []
-                    manifest, data = assemble([level, *coarser], plan.shape, plan.grid_origin)
+                    coarser = [plan.coarse(slabs)] if plan.coarse is not None else None
+                    del slabs
+                    manifest, data = assemble_object(rows, coarser, plan.shape, plan.grid_origin)
                 written = isinstance(data, int)  # its size: the task wrote the data
                 if spec is None:
                     (work / "mesh" / f"{segment}.index").write_bytes(manifest)

@@ -20,7 +20,7 @@ import numpy as np
 from ...atomic import DISK_FULL_ERRNOS, disk_full_error
 from ...errors import IsoconvertError, OutputError
 from ...mesh import Mesh, MeshParts, slab_split
-from .fragments import dracopy, encode_levels, encoded
+from .fragments import assemble, dracopy, encode_levels, encoded
 from .octree import (
     Octree,
     cut_level,
@@ -40,7 +40,7 @@ Collapse = Callable[[Mesh, float, np.ndarray | None], np.ndarray]
 
 #: ``map_objects(function, tasks)``: ``function(*args)`` for each ``(what, args,
 #: kept)`` of ``tasks`` (``what`` names the task in errors), the results in order. A
-#: :class:`Preceding` argument stands for the results of the tasks just before, each
+#: :class:`Preceding` argument stands for the results of earlier tasks, each
 #: ``kept``: those are the later task's alone (on a cluster they go from worker to
 #: worker), and the map may give None in their place.
 ObjectMap = Callable[[Callable[..., tuple], Iterable[tuple[str, tuple, bool]]], Iterable]
@@ -54,18 +54,22 @@ SLAB_TRIANGLES = 1 << 18
 
 @dataclass(frozen=True)
 class Preceding:
-    """An argument of a layer's task (see :data:`ObjectMap`): the results of the
-    ``count`` tasks just before it, as a list."""
+    """An argument of a layer's task (see :data:`ObjectMap`): the results of
+    ``count`` earlier tasks, as a list: those ending ``skip`` tasks before it."""
 
     count: int
+    skip: int = 0
 
 
 @dataclass(frozen=True)
 class Rows:
     """An object made a z-row of level-0 nodes at a time: its octree, its rows'
     count, and, with coarser levels, its slabs' count and what makes the levels
-    from their collapses (:func:`_coarse_fragments`), here or (``elsewhere``) as
-    one more task after the slabs', which takes their results."""
+    from their collapses (:func:`_coarse_fragments`). Made here, the tasks'
+    results are put together here; ``elsewhere`` (a cluster), the coarser levels
+    are one more task, given the slabs' results, and a last task
+    (:func:`assemble_object`), given the rows' and that one's, writes the object
+    as an object's task does, so that only its manifest comes back."""
 
     shape: np.ndarray
     grid_origin: np.ndarray
@@ -85,7 +89,7 @@ def object_tasks(
     bits: int,
     chunk: float | str | None,
     collapse: Collapse | None,
-    coarse_elsewhere: bool = False,
+    elsewhere: bool = False,
 ) -> Iterator[tuple[int, str, Callable, tuple]]:
     """Each object's tasks, ``(segment, what, encode, args)``, an object at a time,
     its plan put in ``plans`` before them: ``(segment, None)`` for one
@@ -97,9 +101,10 @@ def object_tasks(
     the row, so that no object's whole mesh is built (the same bytes, as
     :func:`cut_level` makes each row from those triangles alone), or, held by one
     node, one :func:`encode_node` task; then a large one's coarser levels are one
-    :func:`collapse_slab` task per z-slab of it (:func:`_coarse_levels`), and with
-    ``coarse_elsewhere`` one task more that makes them from the slabs' results
-    (a :class:`Preceding` argument; else they are made where the results come)."""
+    :func:`collapse_slab` task per z-slab of it (:func:`_coarse_levels`); with
+    ``elsewhere``, one task more makes them from the slabs' results, and one
+    :func:`assemble_object` task puts the object together (:class:`Preceding`
+    arguments; else the results are put together where they come)."""
     top = float(2**bits - 1)
 
     def to_index(world: np.ndarray) -> np.ndarray:
@@ -129,7 +134,8 @@ def object_tasks(
                     octree = (grid_origin, shape, top, lo, hi, cut)
                     coarse = functools.partial(_coarse_fragments, lods, collapse, octree, bits)
                     slabs = -(-pieces.n_cells // SLAB_TRIANGLES)
-                    plan = replace(plan, slabs=slabs, coarse=coarse, elsewhere=coarse_elsewhere)
+                    plan = replace(plan, slabs=slabs, coarse=coarse)
+                plan = replace(plan, elsewhere=elsewhere)
                 plans.append((segment, plan))
                 if not cut:  # level 0 is one fragment: the whole mesh
                     whole = pieces.whole()
@@ -144,8 +150,14 @@ def object_tasks(
                     args = (slab.vertices, slab.cells, used, shared, origin, inverse, collapse)
                     yield segment, f"object {segment}, slab {n} of its levels", collapse_slab, args
                 if plan.elsewhere:
-                    what = f"object {segment}, its coarser levels"
-                    yield segment, what, plan.coarse, (Preceding(plan.slabs),)
+                    coarser = None
+                    if plan.coarse is not None:
+                        what = f"object {segment}, its coarser levels"
+                        yield segment, what, plan.coarse, (Preceding(plan.slabs),)
+                        coarser = Preceding(1)
+                    made = plan.slabs + (coarser is not None)  # the tasks after the rows
+                    args = (Preceding(plan.rows, made), coarser, plan.shape, plan.grid_origin)
+                    yield segment, f"object {segment}", assemble_object, args
                 continue
         if mesh is None:
             mesh = pieces.whole()
@@ -294,6 +306,32 @@ def encode_node(
     return encoded(level, bits, dracopy())
 
 
+def assemble_object(
+    rows: list[dict[tuple[int, int, int], bytes]],
+    coarser: list[list[dict[tuple[int, int, int], bytes]]] | None,
+    shape: np.ndarray,
+    grid_origin: np.ndarray,
+) -> tuple[bytes, bytes]:
+    """An object made in rows, put together: its manifest and fragment data, as
+    :func:`encode_object` gives them (:func:`write_object` writes the data).
+
+    Parameters
+    ----------
+    rows : list of dict
+        Its rows' (or its one node's) level-0 fragments by node position.
+    coarser : list or None
+        One result of :func:`_coarse_fragments` (its coarser levels' fragments, a
+        dict a level), or None for one level.
+    shape : (3,) float64
+    grid_origin : (3,) float64
+        Its octree's finest nodes and their grid origin.
+    """
+    level: dict = {}
+    for fragments in rows:
+        level.update(fragments)
+    return assemble([level, *(coarser[0] if coarser else [])], shape, grid_origin)
+
+
 def collapse_slab(
     vertices: np.ndarray,
     cells: np.ndarray,
@@ -411,15 +449,16 @@ def index_of(world: np.ndarray, origin: np.ndarray, inverse: np.ndarray) -> np.n
 
 def write_object(target: str | None, layer: str, encode: Callable, *args) -> tuple | dict:
     """A layer's task on a cluster: ``encode(*args)``, :func:`encode_object`,
-    :func:`encode_row`, :func:`encode_node`, :func:`collapse_slab` or a large
-    object's coarser levels from its slabs' (:func:`_coarse_fragments`). An object's
-    fragment data is written by the task itself to ``target`` (in the layer's part
-    folder) when it sees that folder (a file system shared with the client, as a
-    cluster's output usually is), and only the manifest and the data's size come
-    back; a task that does not see it sends the data back instead, for the client
-    to write. The others' results (``target`` None) always come back: a row's or
-    a node's fragments, to be put in the object's order, the coarser levels' (a
-    slab's collapse goes to the task that makes them).
+    :func:`encode_row`, :func:`encode_node`, :func:`collapse_slab`, a large
+    object's coarser levels from its slabs' (:func:`_coarse_fragments`) or
+    :func:`assemble_object`. An object's fragment data (:func:`encode_object`'s,
+    :func:`assemble_object`'s) is written by the task itself to ``target`` (in the
+    layer's part folder) when it sees that folder (a file system shared with the
+    client, as a cluster's output usually is), and only the manifest and the data's
+    size come back; a task that does not see it sends the data back instead, for
+    the client to write. The others' results (``target`` None) go to the task that
+    puts them together (kept on the cluster), or come back when that is here: a
+    row's or a node's fragments, a slab's collapse, the coarser levels'.
 
     Parameters
     ----------
