@@ -413,8 +413,7 @@ def write_precomputed(
                 if plan is None:
                     manifest, data = first
                 elif plan.elsewhere:  # the tasks before the last are kept there
-                    kept = plan.rows + plan.slabs + (plan.coarse is not None)
-                    for _ in range(kept - 1):
+                    for _ in range(plan.kept - 1):
                         next(done)
                     manifest, data = next(done)
                 else:  # put together here, as the last task does there

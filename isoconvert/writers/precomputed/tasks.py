@@ -78,6 +78,12 @@ class Rows:
     coarse: Callable[[list[tuple]], list[dict]] | None = None
     elsewhere: bool = False
 
+    @property
+    def kept(self) -> int:
+        """Its tasks before the last, ``elsewhere``: the rows', the slabs' and the
+        coarser levels' (whose results go to the last)."""
+        return self.rows + self.slabs + (self.coarse is not None)
+
 
 def object_tasks(
     meshes: Mapping[int, Mesh],
@@ -155,8 +161,8 @@ def object_tasks(
                         what = f"object {segment}, its coarser levels"
                         yield segment, what, plan.coarse, (Preceding(plan.slabs),)
                         coarser = Preceding(1)
-                    made = plan.slabs + (coarser is not None)  # the tasks after the rows
-                    args = (Preceding(plan.rows, made), coarser, plan.shape, plan.grid_origin)
+                    after = plan.kept - plan.rows  # the slabs' and the coarser levels'
+                    args = (Preceding(plan.rows, after), coarser, plan.shape, plan.grid_origin)
                     yield segment, f"object {segment}", assemble_object, args
                 continue
         if mesh is None:
