@@ -35,7 +35,8 @@ the peer), beside the best and median times. The pipelines:
   object rather than per voxel.
 - ``layer-one``: one large object (a bumpy ball in a 448^3 uint8 volume, 1.5 million
   triangles) to a layer of one level cut into 64-voxel fragments, within ``--max-memory
-  256M`` and whole, and of 3 levels within that budget, beside the same surface as a
+  256M`` and whole, of one level in 128-voxel fragments (``auto``'s for it) and of 3
+  levels in 64-voxel ones within that budget, beside the same surface as a
   PLY within it (the bound the other outputs keep) and the zmesh + cloud-volume script
   (one legacy fragment): the peak of cutting and decimating one large object; and the
   defaults (3 levels, ``--fragment-size auto``) against one fragment a level
@@ -402,6 +403,10 @@ def one_object_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]
         ),  # fmt: skip
         Command("isoconvert fragments 64, in memory", layer + ["-o", str(tmp / "one_m")]),
         Command(
+            f"isoconvert fragments 128 --max-memory {LARGE_BUDGET}",
+            [*layer[:-1], "128", *budget, "-o", str(tmp / "one_128")],
+        ),  # --fragment-size auto's for this object
+        Command(
             f"isoconvert 3 levels, fragments 64 --max-memory {LARGE_BUDGET}",
             [*layer[:-3], "3", *layer[-2:], *budget, "-o", str(tmp / "one_3")],
         ),
@@ -426,10 +431,11 @@ def one_object_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]
             ),
         ]
     peer = "zmesh + cloud-volume script (legacy)"
-    ply = commands[3].name
+    ply = commands[4].name
     return commands, [(commands[0].name, ply, None), (commands[2].name, ply, None),
-                      (commands[1].name, peer, None), (commands[5].name, commands[6].name, None),
-                      (commands[7].name, commands[8].name, None)]  # fmt: skip
+                      (commands[3].name, ply, None), (commands[1].name, peer, None),
+                      (commands[6].name, commands[7].name, None),
+                      (commands[8].name, commands[9].name, None)]  # fmt: skip
 
 
 def cluster_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list, object]:

@@ -443,7 +443,7 @@ def layer_objects_on(opts: ConvertOptions, source: str):
     with ``--scheduler``, each object is one task of the cluster (its coarser levels
     decimated, everything Draco-encoded and the fragments written by a worker, the
     manifest sent back and written here, in order), or, for a label cut into
-    fragments from its parts, each z-row of its level-0 fragments is, and so are a
+    fragments from its parts, each row of its level-0 fragments is, and so are a
     large label's slabs, collapsed, its coarser levels made from them, and a last
     task that puts the label together and writes it (the others' results go to it
     from worker to worker, and only the manifest comes back); otherwise None,

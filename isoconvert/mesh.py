@@ -423,11 +423,12 @@ class MeshParts(Protocol):
         ...
 
     def reaching(
-        self, to_index: Callable[[np.ndarray], np.ndarray], low: float, high: float
+        self, to_index: Callable[[np.ndarray], np.ndarray], low: np.ndarray, high: np.ndarray
     ) -> Mesh:
-        """At least every triangle whose ``to_index`` z-range meets ``[low, high]``,
-        in the whole mesh's order, over its vertices in theirs (a whole mesh's
-        triangles and vertices, some left out)."""
+        """At least every triangle whose ``to_index`` box meets the box ``low`` to
+        ``high`` ((3,) each, unbounded in x when a layer asks), in the whole mesh's
+        order, over its vertices in theirs (a whole mesh's triangles and vertices,
+        some left out)."""
         ...
 
     @property
@@ -489,6 +490,16 @@ def slab_split(
         shared[ids] |= seen[ids]
         seen[ids] = True
     return order, ends, shared, base
+
+
+def outward_float32(low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ranges ``low``..``high`` (float64) held in float32, rounded outward: half
+    the memory, and a range selected by them holds at least the ones the exact
+    values would select (a layer's row filters its triangles exactly again)."""
+    low32, high32 = low.astype(np.float32), high.astype(np.float32)
+    low32 = np.where(low32 > low, np.nextafter(low32, np.float32(-np.inf)), low32)
+    high32 = np.where(high32 < high, np.nextafter(high32, np.float32(np.inf)), high32)
+    return low32, high32
 
 
 def _import(module: str, package: str):

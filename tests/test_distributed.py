@@ -681,7 +681,7 @@ def test_one_cut_level_is_encoded_on_the_workers_a_row_of_fragments_per_task(
     address, monkeypatch, tmp_path, sharded
 ):
     """With a scheduler, a label layer of one level cut into fragments: each task
-    is one z-row of one label's fragments, made of the triangles reaching it (no
+    is one row of one label's fragments, made of the triangles reaching it (no
     task gets a whole label, and the client builds none), then one task a label
     is given its rows' fragments (from the workers) and writes it, and the layer
     is the one written here, byte for byte."""

@@ -764,7 +764,7 @@ def test_slabs_collapsed_apart_meet_in_a_manifold_union(tmp_path, monkeypatch, d
 
 
 def test_triangles_crossing_several_rows_of_fragments_are_cut_alike_in_each(tmp_path):
-    """Fragments are made one z-row of nodes at a time: a triangle taller than a
+    """Fragments are made one row of nodes at a time: a triangle taller than a
     row is taken by every row it reaches, and each must cut it at the same planes
     in the same order (one cut only at a row's own planes gives different seam
     vertices, and cracks). An icosahedron of 20 triangles, 40 voxels across, in
@@ -811,6 +811,55 @@ def test_fragments_made_from_each_labels_parts_are_those_of_its_whole_surface(
     assert {label: (parted.summary(label).n_vertices, parted.summary(label).n_cells)
             for label in parted.labels} == expected  # fmt: skip
     assert built == []
+
+
+@pytest.mark.parametrize("given", ["net", "whole"])
+def test_a_row_of_fragments_is_given_every_triangle_reaching_it_in_y_and_z(labelled, given):
+    """A row of nodes (along x) is made from the triangles its object's parts say
+    reach it: every triangle of the whole surface whose y- and z-ranges (index
+    coordinates, exact) meet the row's box must be among them, in the whole
+    surface's order, and few others (the y-ranges are held in float32, rounded
+    outward): a z-layer of rows would take several times as many. From
+    the net's quads (a label's parts) and from a whole mesh's triangles (a large
+    isosurface's)."""
+    from isoconvert.writers.precomputed.tasks import _WholeParts, index_of
+
+    volume, result = labelled
+    grid = result.grid
+    origin = np.asarray(grid["origin"], np.float64)
+    inverse = np.linalg.inv(np.asarray(grid["affine"], np.float64))
+
+    def to_index(world):
+        return index_of(world, origin, inverse)
+
+    for label in result.labels:
+        mesh = result[label]
+        parts = result.parts(label) if given == "net" else _WholeParts(mesh)
+        index = to_index(np.asarray(mesh.vertices, np.float64))
+        corners = index[mesh.cells]  # (C, 3, 3)
+        low, high = corners.min(axis=1), corners.max(axis=1)
+        middle = (low.min(axis=0) + high.max(axis=0)) / 2
+        box_low = np.array([-np.inf, middle[1] - 3.0, middle[2] - 2.5])
+        box_high = np.array([np.inf, middle[1] + 3.0, middle[2] + 2.5])
+        meets = ((high >= box_low) & (low <= box_high)).all(axis=1)
+        in_layer = (high[:, 2] >= box_low[2]) & (low[:, 2] <= box_high[2])
+        assert 0 < meets.sum() < in_layer.sum() / 2, label
+        part = parts.reaching(to_index, box_low, box_high)
+        # triangles as their corners' positions, to find them in the whole surface
+        mine = np.asarray(part.vertices)[np.asarray(part.cells)].reshape(len(part.cells), 9)
+        theirs = np.asarray(mesh.vertices)[mesh.cells].reshape(len(mesh.cells), 9)
+        where = {row.tobytes(): n for n, row in enumerate(theirs)}
+        found = np.array([where[row.tobytes()] for row in mine])
+        assert (np.diff(found) > 0).all(), label  # the whole surface's, in its order
+        assert set(np.flatnonzero(meets)) <= set(found.tolist()), label
+        assert len(found) < in_layer.sum() / 2, label
+        # the others: a whole mesh's within float32 rounding of the box; the net's
+        # are the other triangle of a quad whose y- and z-ranges meet it (the net
+        # holds a quad's ranges), within a voxel of it
+        extra = np.setdiff1d(found, np.flatnonzero(meets))
+        near = (1e-4, 0.01) if given == "whole" else (1.0, 0.2)
+        reach = np.maximum(box_low - high[extra], low[extra] - box_high)[:, 1:].max(axis=1)
+        assert (reach < near[0]).all() and len(extra) <= near[1] * meets.sum(), label
 
 
 def test_a_sharded_layer_holds_the_same_objects(tmp_path):

@@ -95,7 +95,7 @@ from .. import _native
 from ..atomic import DiskFullError, disk_full_error, free_space
 from ..errors import LevelError, VolumeError
 from ..memory import release, release_freed_memory
-from ..mesh import Mesh, MeshSummary, slab_split
+from ..mesh import Mesh, MeshSummary, outward_float32, slab_split
 from ..threads import kernel_threads
 from ..volume import Volume
 from .label_blocks import (
@@ -310,7 +310,8 @@ class LabelParts:
     triangles of the net's quads that reach a z-range, made by the kernel that
     makes its whole mesh (``label_mesh``) from only those quads, so that they come
     in the whole mesh's order over its vertices in theirs. Holds each quad's
-    z-range (16 bytes a quad), not the mesh (about 80).
+    z-range and y-range (the latter in float32, rounded outward: 24 bytes a quad),
+    not the mesh (about 80).
     """
 
     #: Quads whose corners' positions are converted at once.
@@ -322,19 +323,23 @@ class LabelParts:
         self._owner, self._label = owner, label
         self._quads = net.quads[net.offsets[n] : net.offsets[n + 1]]
         self._inside = int(net.inside[n])
-        self._low = self._high = None
+        self._low = self._high = self._y = None
 
     def extent(self, to_index: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         net = self._owner._net
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        low, high = np.empty(len(self._quads)), np.empty(len(self._quads))
+        n = len(self._quads)
+        low, high = np.empty(n), np.empty(n)
+        y_low, y_high = np.empty(n, np.float32), np.empty(n, np.float32)
         corners = net.corners[self._quads]  # (n, 4)
         for a in range(0, len(corners), self.PIECE):
-            z = to_index(net.vertices[corners[a : a + self.PIECE].reshape(-1)]).reshape(-1, 4, 3)
-            lo, hi = np.minimum(lo, z.min(axis=(0, 1))), np.maximum(hi, z.max(axis=(0, 1)))
-            low[a : a + self.PIECE] = z[:, :, 2].min(axis=1)
-            high[a : a + self.PIECE] = z[:, :, 2].max(axis=1)
-        self._low, self._high = low, high
+            p = to_index(net.vertices[corners[a : a + self.PIECE].reshape(-1)]).reshape(-1, 4, 3)
+            lo, hi = np.minimum(lo, p.min(axis=(0, 1))), np.maximum(hi, p.max(axis=(0, 1)))
+            low[a : a + self.PIECE] = p[:, :, 2].min(axis=1)
+            high[a : a + self.PIECE] = p[:, :, 2].max(axis=1)
+            y = outward_float32(p[:, :, 1].min(axis=1), p[:, :, 1].max(axis=1))
+            y_low[a : a + self.PIECE], y_high[a : a + self.PIECE] = y
+        self._low, self._high, self._y = low, high, (y_low, y_high)
         release(net.corners)
         release(net.vertices)
         # what the results say of the surface, without building it
@@ -345,12 +350,15 @@ class LabelParts:
         return lo, hi
 
     def reaching(
-        self, to_index: Callable[[np.ndarray], np.ndarray], low: float, high: float
+        self, to_index: Callable[[np.ndarray], np.ndarray], low: np.ndarray, high: np.ndarray
     ) -> Mesh:
         if self._low is None:
             self.extent(to_index)
         net = self._owner._net
-        taken = np.flatnonzero((self._high >= low) & (self._low <= high))
+        (y_low, y_high), (_, y0, z0), (_, y1, z1) = self._y, low, high
+        taken = np.flatnonzero(
+            (self._high >= z0) & (self._low <= z1) & (y_high >= y0) & (y_low <= y1)
+        )
         # the quads it is inside of come first, as in the whole mesh
         inside = int(np.searchsorted(taken, self._inside))
         _, _, local, verts = _native.label_mesh(

@@ -59,7 +59,7 @@ and renames the folder into place. A worker that does not see the folder, or may
 not write there, sends the data back instead.
 
 An object given in parts (a label's, from the surface net) and cut into fragments
-is encoded a z-row of level-0 nodes at a time instead (:func:`.tasks.encode_row`, one
+is encoded a row of level-0 nodes (along x) at a time instead (:func:`.tasks.encode_row`, one
 task each, the fragments sent back and put in order here), never built whole;
 when it is large (:data:`.tasks.LARGE_OBJECT`) its coarser levels are collapsed in slabs
 here (:func:`.tasks._coarse_levels`).

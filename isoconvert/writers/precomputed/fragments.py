@@ -37,7 +37,7 @@ def encode_levels(
     ``chunk`` is None or the object fits in one, the object's bounding box: then
     every level is a single fragment. Otherwise each level's mesh is cut at the
     planes of its nodes' 2x2x2 partition and its triangles go to the node holding
-    their centroid, one z-row of nodes at a time (:func:`cut_level`).
+    their centroid, one row of nodes (along x) at a time (:func:`cut_level`).
     """
     lo = np.min([m.vertices.min(axis=0) for m in levels], axis=0)
     hi = np.max([m.vertices.max(axis=0) for m in levels], axis=0)

@@ -266,7 +266,7 @@ def write_precomputed(
         else 1.
     parts : callable or None
         ``parts(segment)``: the object of ``meshes[segment]`` in parts, for a layer
-        cut into fragments: each z-row of level-0 fragments is made from the
+        cut into fragments: each row of level-0 fragments (along x) is made from the
         triangles that reach it, one task each (here, or by ``map_objects``), and
         no object's whole mesh is built (the same bytes); with coarser levels, only
         for objects of more than :data:`LARGE_OBJECT` triangles (the others whole).

@@ -18,7 +18,7 @@ import numpy as np
 #: ``--fragment-size auto`` (the default): an object of more than ``AUTO_CUT``
 #: triangles (some 600 KB of Draco at level 0) is cut into nodes of
 #: ``AUTO_FRAGMENT`` voxels a side, so that a viewer loads only the parts it shows
-#: and level 0 is made a z-row of nodes at a time (a label surface has about 3.5
+#: and level 0 is made a row of nodes at a time (a label surface has about 3.5
 #: triangles per voxel of its area: up to about 100,000 in a 128-voxel node); a
 #: smaller one is one fragment a level, which a viewer loads whole anyway (cutting
 #: adds triangles where the planes cross it, most at the coarser levels, and makes
@@ -94,18 +94,24 @@ def one_node(
 
 
 def cut_level(
-    vertices: np.ndarray, cells: np.ndarray, frame: Octree, rows: Iterable[int] | None = None
+    vertices: np.ndarray,
+    cells: np.ndarray,
+    frame: Octree,
+    rows: Iterable[tuple[int, int]] | None = None,
 ) -> dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]:
     """One level's fragments: for each node its quantized vertices and triangles.
 
-    The level is cut one z-row of nodes at a time: the triangles reaching the row
-    (or within a snapping distance of it) are cut at every plane of the partition
-    (:func:`_cut_at_planes`) and the pieces whose centroid lies in the row are
-    kept. A triangle is cut the same way in each row that takes it (the same
-    planes in the same order, each new vertex from the same two ends), so the rows
-    meet exactly; the peak holds one row's pieces, not the whole level's (an
-    object of 1.5 million triangles in 64-voxel fragments within ``--max-memory
-    256M``: 476 MB cut whole, 344 MB a row at a time, see bench/RESULTS.md).
+    The level is cut one row of nodes (along x, at one y and z) at a time: the
+    triangles reaching the row (or within a snapping distance of it) are cut at
+    every plane of the partition (:func:`_cut_at_planes`) and the pieces whose
+    centroid lies in the row are kept. A triangle is cut the same way in each row
+    that takes it (the same planes in the same order, each new vertex from the same
+    two ends, the row's vertices and pieces in their order in the level), so the
+    rows meet exactly and a node's fragment is the same whichever triangles besides
+    it a row is given; the peak holds one row's pieces, not the whole level's (an
+    object of 1.5 million triangles in 128-voxel fragments within ``--max-memory
+    256M``, see bench/RESULTS.md: 324 MB cut a z-layer of nodes at a time, 208 MB
+    a row at a time).
 
     Parameters
     ----------
@@ -113,17 +119,24 @@ def cut_level(
         Index coordinates.
     cells : (C, 3) int64
     frame : Octree
-    rows : iterable of int or None
-        The z-rows of nodes to make (``vertices`` and ``cells`` then need hold only
-        the triangles that reach them, in the level's order, their vertices in
-        theirs: :func:`.tasks.encode_row`); None: every row of the object.
+    rows : iterable of (int, int) or None
+        The rows of nodes to make, each its (y, z) position, z-ordered
+        (``vertices`` and ``cells`` then need hold only the triangles that reach
+        them, in the level's order, their vertices in theirs:
+        :func:`.tasks.encode_row`); None: every row of the object
+        (:func:`node_rows`).
     """
     level: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
-    low, high = triangle_extents(vertices, cells, 2)
-    for row in node_rows(frame) if rows is None else rows:
-        start, end = row_span(frame, row)
-        taken = (high >= start) & (low <= end)
-        if not taken.any():
+    low_y, high_y = triangle_extents(vertices, cells, 1)
+    low_z, high_z = triangle_extents(vertices, cells, 2)
+    layer, in_layer = None, np.arange(0)
+    for y, z in node_rows(frame) if rows is None else rows:
+        start, end = row_span(frame, (y, z))
+        if z != layer:  # the triangles reaching this z-layer of rows, once for all of it
+            layer = z
+            in_layer = np.flatnonzero((high_z >= start[2]) & (low_z <= end[2]))
+        taken = in_layer[(high_y[in_layer] >= start[1]) & (low_y[in_layer] <= end[1])]
+        if not len(taken):
             continue
         # the row's vertices in their order in the level (so that each cut takes
         # an edge's ends in the same order in every row)
@@ -131,7 +144,7 @@ def cut_level(
         part, pieces = _cut_at_planes(vertices[used], local.reshape(-1, 3), frame)
         centroid = part[pieces].mean(axis=1)
         where = np.maximum(np.floor((centroid - frame.origin) / frame.node).astype(np.int64), 0)
-        mine = where[:, 2] == row
+        mine = (where[:, 1] == y) & (where[:, 2] == z)
         if not mine.any():  # the row's triangles are all in the rows beside it
             continue
         where, pieces = where[mine], pieces[mine]
@@ -159,18 +172,26 @@ def cut_level(
     return level
 
 
-def node_rows(frame: Octree) -> range:
-    """The z-rows of nodes an object's box reaches."""
-    span = np.floor((np.array([frame.lo[2], frame.hi[2]]) - frame.origin[2]) / frame.node[2])
-    return range(max(int(span[0]), 0), int(span[1]) + 1)
+def node_rows(frame: Octree) -> list[tuple[int, int]]:
+    """The rows of nodes (along x) an object's box reaches, each its (y, z)
+    position, z-layer by z-layer."""
+    span = np.floor((np.stack([frame.lo, frame.hi]) - frame.origin) / frame.node).astype(int)
+    first = np.maximum(span[0], 0)
+    return [
+        (y, z) for z in range(first[2], span[1, 2] + 1) for y in range(first[1], span[1, 1] + 1)
+    ]
 
 
-def row_span(frame: Octree, row: int) -> tuple[float, float]:
-    """The z-range whose triangles a row of nodes takes: the row, and a snapping
-    distance (a quantization step) beyond it each way."""
-    start = frame.origin[2] + row * frame.node[2]
-    reach = frame.node[2] / frame.top
-    return start - reach, start + frame.node[2] + reach
+def row_span(frame: Octree, row: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The box whose triangles a row of nodes at ``row`` = (y, z) takes: the row,
+    and a snapping distance (a quantization step) beyond it each way; (3,) each,
+    unbounded in x."""
+    y, z = row
+    start = frame.origin + np.array([0.0, y, z]) * frame.node
+    reach = frame.node / frame.top
+    low, high = start - reach, start + frame.node + reach
+    low[0], high[0] = -np.inf, np.inf
+    return low, high
 
 
 def _cut_at_planes(

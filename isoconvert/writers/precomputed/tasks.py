@@ -1,5 +1,5 @@
 """A layer's objects as tasks of arrays and scalars, which a cluster's workers can
-run: an object whole (:func:`encode_object`), a z-row of its level-0 fragments
+run: an object whole (:func:`encode_object`), a row of its level-0 fragments
 (:func:`encode_row`), its level 0 as one node (:func:`encode_node`), or a z-slab of
 a large object collapsed for its coarser levels (:func:`collapse_slab`), and the
 plans that put their results together (:func:`object_tasks`, :class:`Rows`).
@@ -19,7 +19,7 @@ import numpy as np
 
 from ...atomic import DISK_FULL_ERRNOS, disk_full_error
 from ...errors import IsoconvertError, OutputError
-from ...mesh import Mesh, MeshParts, slab_split
+from ...mesh import Mesh, MeshParts, outward_float32, slab_split
 from .fragments import assemble, dracopy, encode_levels, encoded
 from .octree import (
     Octree,
@@ -63,7 +63,7 @@ class Preceding:
 
 @dataclass(frozen=True)
 class Rows:
-    """An object made a z-row of level-0 nodes at a time: its octree, its rows'
+    """An object made a row of level-0 nodes (along x) at a time: its octree, its rows'
     count, and, with coarser levels, its slabs' count and what makes the levels
     from their collapses (:func:`_coarse_fragments`). Made here, the tasks'
     results are put together here; ``elsewhere`` (a cluster), the coarser levels
@@ -103,7 +103,7 @@ def object_tasks(
     object given in parts that is cut into fragments with one level, or for one
     large (:data:`LARGE_OBJECT` triangles) with more, given in parts or whole
     (:class:`_WholeParts`): level 0 is one :func:`encode_row`
-    task per z-row of nodes its box reaches, each made of the triangles that reach
+    task per row of nodes (along x) its box reaches, each made of the triangles that reach
     the row, so that no object's whole mesh is built (the same bytes, as
     :func:`cut_level` makes each row from those triangles alone), or, held by one
     node, one :func:`encode_node` task; then a large one's coarser levels are one
@@ -151,7 +151,8 @@ def object_tasks(
                 for row in rows if cut else ():
                     part = pieces.reaching(to_index, *row_span(frame, row))
                     args = (part.vertices, part.cells, origin, inverse, frame, row, bits)
-                    yield segment, f"object {segment}, z-row {row} of fragments", encode_row, args
+                    what = f"object {segment}, row y {row[0]} z {row[1]} of fragments"
+                    yield segment, what, encode_row, args
                 for n, (slab, used, shared) in enumerate(pieces.slabs(to_index, plan.slabs)):
                     args = (slab.vertices, slab.cells, used, shared, origin, inverse, collapse)
                     yield segment, f"object {segment}, slab {n} of its levels", collapse_slab, args
@@ -181,7 +182,7 @@ class _WholeParts:
     def __init__(self, mesh: Mesh) -> None:
         self._mesh = mesh
         self._cells = np.asarray(mesh.cells, dtype=np.int64)
-        self._low = self._high = self._box = None
+        self._low = self._high = self._box = self._y = None
 
     @property
     def n_cells(self) -> int:
@@ -192,14 +193,18 @@ class _WholeParts:
             index = to_index(np.asarray(self._mesh.vertices, dtype=np.float64))
             self._box = index.min(axis=0), index.max(axis=0)
             self._low, self._high = triangle_extents(index, self._cells, 2)
+            self._y = outward_float32(*triangle_extents(index, self._cells, 1))
 
     def extent(self, to_index: Callable) -> tuple[np.ndarray, np.ndarray]:
         self._extents(to_index)
         return self._box
 
-    def reaching(self, to_index: Callable, low: float, high: float) -> Mesh:
+    def reaching(self, to_index: Callable, low: np.ndarray, high: np.ndarray) -> Mesh:
         self._extents(to_index)
-        return self._part((self._high >= low) & (self._low <= high))[0]
+        (y_low, y_high), (_, y0, z0), (_, y1, z1) = self._y, low, high
+        return self._part((self._high >= z0) & (self._low <= z1) & (y_high >= y0) & (y_low <= y1))[
+            0
+        ]
 
     def slabs(
         self, to_index: Callable, count: int
@@ -266,10 +271,10 @@ def encode_row(
     origin: np.ndarray,
     inverse: np.ndarray,
     frame: Octree,
-    row: int,
+    row: tuple[int, int],
     bits: int,
 ) -> dict[tuple[int, int, int], bytes]:
-    """One z-row of nodes of an object's level 0, cut (:func:`cut_level`) and
+    """One row of nodes (along x) of an object's level 0, cut (:func:`cut_level`) and
     Draco-encoded: a task of arrays and scalars, which a cluster's worker can run.
 
     Parameters
@@ -282,7 +287,8 @@ def encode_row(
         As :func:`encode_object`.
     frame : Octree
         The object's level 0.
-    row : int
+    row : (int, int)
+        Its (y, z) position.
     bits : int
 
     Returns
