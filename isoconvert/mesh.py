@@ -502,6 +502,18 @@ def outward_float32(low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.n
     return low32, high32
 
 
+def meeting_rows(
+    z: tuple[np.ndarray, np.ndarray],
+    y: tuple[np.ndarray, np.ndarray],
+    low: np.ndarray,
+    high: np.ndarray,
+) -> np.ndarray:
+    """Which faces' z-ranges ``z`` and y-ranges ``y`` (float32 from
+    :func:`outward_float32`) meet the box ``low``..``high`` ((3,) each, x not
+    looked at): what :meth:`MeshParts.reaching` selects, (F,) bool."""
+    return (z[1] >= low[2]) & (z[0] <= high[2]) & (y[1] >= low[1]) & (y[0] <= high[1])
+
+
 def _import(module: str, package: str):
     """``module``, or a one-line IsoconvertError saying how to install ``package``."""
     import importlib

@@ -95,7 +95,7 @@ from .. import _native
 from ..atomic import DiskFullError, disk_full_error, free_space
 from ..errors import LevelError, VolumeError
 from ..memory import release, release_freed_memory
-from ..mesh import Mesh, MeshSummary, outward_float32, slab_split
+from ..mesh import Mesh, MeshSummary, meeting_rows, outward_float32, slab_split
 from ..threads import kernel_threads
 from ..volume import Volume
 from .label_blocks import (
@@ -355,10 +355,7 @@ class LabelParts:
         if self._low is None:
             self.extent(to_index)
         net = self._owner._net
-        (y_low, y_high), (_, y0, z0), (_, y1, z1) = self._y, low, high
-        taken = np.flatnonzero(
-            (self._high >= z0) & (self._low <= z1) & (y_high >= y0) & (y_low <= y1)
-        )
+        taken = np.flatnonzero(meeting_rows((self._low, self._high), self._y, low, high))
         # the quads it is inside of come first, as in the whole mesh
         inside = int(np.searchsorted(taken, self._inside))
         _, _, local, verts = _native.label_mesh(

@@ -19,7 +19,7 @@ import numpy as np
 
 from ...atomic import DISK_FULL_ERRNOS, disk_full_error
 from ...errors import IsoconvertError, OutputError
-from ...mesh import Mesh, MeshParts, outward_float32, slab_split
+from ...mesh import Mesh, MeshParts, meeting_rows, outward_float32, slab_split
 from .fragments import assemble, dracopy, encode_levels, encoded
 from .octree import (
     Octree,
@@ -201,10 +201,7 @@ class _WholeParts:
 
     def reaching(self, to_index: Callable, low: np.ndarray, high: np.ndarray) -> Mesh:
         self._extents(to_index)
-        (y_low, y_high), (_, y0, z0), (_, y1, z1) = self._y, low, high
-        return self._part((self._high >= z0) & (self._low <= z1) & (y_high >= y0) & (y_low <= y1))[
-            0
-        ]
+        return self._part(meeting_rows((self._low, self._high), self._y, low, high))[0]
 
     def slabs(
         self, to_index: Callable, count: int
