@@ -431,6 +431,14 @@ class MeshParts(Protocol):
         some left out)."""
         ...
 
+    def reaching_counts(
+        self, to_index: Callable[[np.ndarray], np.ndarray], lows: np.ndarray, highs: np.ndarray
+    ) -> np.ndarray:
+        """How many triangles :meth:`reaching` gives for each box ``lows[r]`` to
+        ``highs[r]`` ((R, 3) each, a layer's rows in order), (R,) int64, without
+        making them: what a layer plans its tasks by."""
+        ...
+
     @property
     def n_cells(self) -> int:
         """How many triangles the whole mesh has."""
@@ -512,6 +520,27 @@ def meeting_rows(
     :func:`outward_float32`) meet the box ``low``..``high`` ((3,) each, x not
     looked at): what :meth:`MeshParts.reaching` selects, (F,) bool."""
     return (z[1] >= low[2]) & (z[0] <= high[2]) & (y[1] >= low[1]) & (y[0] <= high[1])
+
+
+def meeting_counts(
+    z: tuple[np.ndarray, np.ndarray],
+    y: tuple[np.ndarray, np.ndarray],
+    lows: np.ndarray,
+    highs: np.ndarray,
+) -> np.ndarray:
+    """How many faces :func:`meeting_rows` selects for each box ``lows[r]`` to
+    ``highs[r]`` ((R, 3) each): (R,) int64. Boxes in the order of a layer's rows
+    (z-layer by z-layer): the faces meeting a z-range are found once for all its
+    boxes."""
+    counts = np.zeros(len(lows), dtype=np.int64)
+    at = None
+    for r, (low, high) in enumerate(zip(lows, highs, strict=True)):
+        if at != (low[2], high[2]):
+            at = (low[2], high[2])
+            in_z = np.flatnonzero((z[1] >= low[2]) & (z[0] <= high[2]))
+            y_low, y_high = y[0][in_z], y[1][in_z]
+        counts[r] = np.count_nonzero((y_high >= low[1]) & (y_low <= high[1]))
+    return counts
 
 
 def _import(module: str, package: str):

@@ -662,34 +662,39 @@ def test_layer_objects_are_encoded_and_written_by_the_workers(
 
 def _note_encoder(marker: str, function, *args):
     """A layer's task that notes which encoder it ran, how many triangles it got
-    (an object put together from rows: how many rows' fragments, each a dict),
-    and (a row's) the object's box it was one row of."""
+    (an object put together from rows: how many rows' tasks' fragments, each a
+    dict), and (rows') the object's box they are rows of and how many rows."""
     from isoconvert.convert import _object_task
 
     encoder = getattr(args[2], "__name__", "an object's arrays")
-    box = args[7].lo.tolist() if encoder == "encode_row" else None
+    box = args[7].lo.tolist() if encoder == "encode_rows" else None
+    rows = len(args[8]) if encoder == "encode_rows" else 0
     if encoder == "assemble_object":
         assert all(isinstance(row, dict) for row in args[3])
     count = len(args[3] if encoder == "assemble_object" else args[4])
     with open(marker, "a") as f:
-        f.write(f"{encoder};{count};{box}\n")
+        f.write(f"{encoder};{count};{box};{rows}\n")
     return _object_task(function, *args)
 
 
-@pytest.mark.parametrize("sharded", [False, True])
-def test_one_cut_level_is_encoded_on_the_workers_a_row_of_fragments_per_task(
-    address, monkeypatch, tmp_path, sharded
+@pytest.mark.parametrize(("sharded", "grouped"), [(False, False), (True, True)])
+def test_one_cut_level_is_encoded_on_the_workers_rows_of_fragments_per_task(
+    address, monkeypatch, tmp_path, sharded, grouped
 ):
     """With a scheduler, a label layer of one level cut into fragments: each task
-    is one row of one label's fragments, made of the triangles reaching it (no
-    task gets a whole label, and the client builds none), then one task a label
-    is given its rows' fragments (from the workers) and writes it, and the layer
-    is the one written here, byte for byte."""
+    is one row of one label's fragments (ROW_TRIANGLES 0), or neighbouring rows
+    of one z-layer (by default, these labels being small), made of the triangles
+    reaching them (no task gets a whole label, and the client builds none), then
+    one task a label is given its rows' fragments (from the workers) and writes
+    it, and the layer is the one written here, byte for byte."""
     pytest.importorskip("DracoPy")
     from isoconvert.extract.labels import LabelMeshes, label_surfaces
     from isoconvert.label_convert import convert_labels
+    from isoconvert.writers.precomputed import tasks as layer_tasks
 
     convert_module = sys.modules["isoconvert.convert"]
+    if not grouped:
+        monkeypatch.setattr(layer_tasks, "ROW_TRIANGLES", 0)  # a row a task
     np.save(tmp_path / "atlas.npy", _atlas())
     options = {"format": "precomputed", "lods": 1, "fragment_size": 4.0, "sharded": sharded}
     convert_labels(tmp_path / "atlas.npy", tmp_path / "here", **options)
@@ -706,11 +711,13 @@ def test_one_cut_level_is_encoded_on_the_workers_a_row_of_fragments_per_task(
     convert_labels(tmp_path / "atlas.npy", tmp_path / "there", blocks=blocks, **options)
     assert built == []
     tasks = [line.split(";") for line in marker.read_text().splitlines()]
-    assert {encoder for encoder, _, _ in tasks} == {"encode_row", "assemble_object"}
-    rows: dict[str, list[int]] = {}  # each label's rows' triangles, labels in order
-    for _, n, box in (task for task in tasks if task[0] == "encode_row"):
+    assert {encoder for encoder, *_ in tasks} == {"encode_rows", "assemble_object"}
+    rows: dict[str, list[int]] = {}  # each label's rows' tasks' triangles, labels in order
+    for _, n, box, _ in (task for task in tasks if task[0] == "encode_rows"):
         rows.setdefault(box, []).append(int(n))
-    assembled = [int(n) for encoder, n, _ in tasks if encoder == "assemble_object"]
+    in_task = [int(n) for encoder, *_, n in tasks if encoder == "encode_rows"]
+    assert max(in_task) > 1 if grouped else max(in_task) == 1
+    assembled = [int(n) for encoder, n, *_ in tasks if encoder == "assemble_object"]
     assert len(rows) == len(triangles) and assembled == [len(r) for r in rows.values()]
     for (label, count), taken in zip(triangles.items(), rows.values(), strict=True):
         # several rows, none with every triangle, each triangle in one at least

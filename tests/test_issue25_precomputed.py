@@ -862,6 +862,67 @@ def test_a_row_of_fragments_is_given_every_triangle_reaching_it_in_y_and_z(label
         assert (reach < near[0]).all() and len(extra) <= near[1] * meets.sum(), label
 
 
+def test_an_objects_rows_are_planned_as_tasks_of_neighbouring_rows_triangles_reach(labelled):
+    """The plan of a label's level 0 (:func:`row_tasks`): every row of nodes
+    that a triangle of its whole surface reaches (exact index coordinates) is in
+    one task, rows no triangle comes near are in none, a task's rows are one
+    z-layer's, y increasing, and its rows' triangles (as many as ``reaching``
+    gives each row, which is what ``reaching_counts`` says) add up to at most
+    ``most`` unless it is one row; 0 gives each row its own."""
+    from isoconvert.writers.precomputed import tasks
+    from isoconvert.writers.precomputed.octree import (
+        level_frame,
+        node_rows,
+        object_frame,
+        row_span,
+    )
+
+    volume, result = labelled
+    grid = result.grid
+    origin = np.asarray(grid["origin"], np.float64)
+    inverse = np.linalg.inv(np.asarray(grid["affine"], np.float64))
+
+    def to_index(world):
+        return tasks.index_of(world, origin, inverse)
+
+    left_out = 0
+    for label in result.labels:
+        mesh = result[label]
+        parts = result.parts(label)
+        corners = to_index(np.asarray(mesh.vertices, np.float64))[mesh.cells]
+        low, high = corners.min(axis=1), corners.max(axis=1)
+        lo, hi = parts.extent(to_index)
+        grid_origin, shape, cut = object_frame(lo, hi, 6.0)
+        assert cut, label
+        frame = level_frame(grid_origin, shape, 0, 1023.0, lo, hi)
+        rows = node_rows(frame)
+        spans = [row_span(frame, row) for row in rows]
+        counts = parts.reaching_counts(to_index, *(np.array(e) for e in zip(*spans, strict=True)))
+        for (start, end), count in zip(spans, counts, strict=True):
+            assert count == len(parts.reaching(to_index, start, end).cells), label
+        # rows a triangle reaches, exactly; rows nothing comes within a voxel of
+        reached = {row for row, (start, end) in zip(rows, spans, strict=True)
+                   if ((high >= start) & (low <= end))[:, 1:].all(axis=1).any()}  # fmt: skip
+        near = {row for row, (start, end) in zip(rows, spans, strict=True)
+                if ((high + 1 >= start) & (low - 1 <= end))[:, 1:].all(axis=1).any()}  # fmt: skip
+        count_of = dict(zip(rows, counts.tolist(), strict=True))
+        for most in (0, int(counts.max()), 1 << 30):
+            plan = tasks.row_tasks(parts, to_index, frame, most)
+            planned = [row for task in plan for row in task]
+            assert len(planned) == len(set(planned)), label
+            assert reached <= set(planned) <= near, label
+            for task in plan:
+                ys, zs = zip(*task, strict=True)
+                assert len(set(zs)) == 1 and list(ys) == sorted(set(ys)), label
+                assert len(task) == 1 or sum(count_of[row] for row in task) <= most, label
+            if most == 0:
+                assert all(len(task) == 1 for task in plan), label
+            if most == 1 << 30:  # one task a z-layer
+                assert len(plan) == len({z for _, z in planned}), label
+        left_out += len(rows) - len(planned)
+    assert left_out > 0  # the corners of the labels' boxes
+
+
 def test_a_sharded_layer_holds_the_same_objects(tmp_path):
     """--sharded: 150 labels in shard files; cloud-volume reads every label at every
     level as from the unsharded layer, and the mesh info validates."""

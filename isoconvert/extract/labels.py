@@ -95,7 +95,7 @@ from .. import _native
 from ..atomic import DiskFullError, disk_full_error, free_space
 from ..errors import LevelError, VolumeError
 from ..memory import release, release_freed_memory
-from ..mesh import Mesh, MeshSummary, meeting_rows, outward_float32, slab_split
+from ..mesh import Mesh, MeshSummary, meeting_counts, meeting_rows, outward_float32, slab_split
 from ..threads import kernel_threads
 from ..volume import Volume
 from .label_blocks import (
@@ -364,6 +364,13 @@ class LabelParts:
         release(net.corners)
         release(net.vertices)
         return Mesh(verts, local)
+
+    def reaching_counts(
+        self, to_index: Callable[[np.ndarray], np.ndarray], lows: np.ndarray, highs: np.ndarray
+    ) -> np.ndarray:
+        if self._low is None:
+            self.extent(to_index)
+        return 2 * meeting_counts((self._low, self._high), self._y, lows, highs)
 
     @property
     def n_cells(self) -> int:

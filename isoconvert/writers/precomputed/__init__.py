@@ -59,8 +59,8 @@ and renames the folder into place. A worker that does not see the folder, or may
 not write there, sends the data back instead.
 
 An object given in parts (a label's, from the surface net) and cut into fragments
-is encoded a row of level-0 nodes (along x) at a time instead (:func:`.tasks.encode_row`, one
-task each, the fragments sent back and put in order here), never built whole;
+is encoded a few rows of level-0 nodes (along x) at a time instead
+(:func:`.tasks.encode_rows`, one task each, :func:`.tasks.row_tasks`), never built whole;
 when it is large (:data:`.tasks.LARGE_OBJECT`) its coarser levels are collapsed in slabs
 here (:func:`.tasks._coarse_levels`).
 
@@ -85,7 +85,7 @@ from .tasks import (
     collapse_slab,
     encode_node,
     encode_object,
-    encode_row,
+    encode_rows,
     write_object,
 )
 
@@ -100,7 +100,7 @@ __all__ = [
     "data_type_for",
     "encode_node",
     "encode_object",
-    "encode_row",
+    "encode_rows",
     "layer_transform",
     "not_a_file",
     "object_file",

@@ -123,7 +123,7 @@ def cut_level(
         The rows of nodes to make, each its (y, z) position, z-ordered
         (``vertices`` and ``cells`` then need hold only the triangles that reach
         them, in the level's order, their vertices in theirs:
-        :func:`.tasks.encode_row`); None: every row of the object
+        :func:`.tasks.encode_rows`); None: every row of the object
         (:func:`node_rows`).
     """
     level: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}

@@ -1,6 +1,6 @@
 """A layer's objects as tasks of arrays and scalars, which a cluster's workers can
 run: an object whole (:func:`encode_object`), a row of its level-0 fragments
-(:func:`encode_row`), its level 0 as one node (:func:`encode_node`), or a z-slab of
+(:func:`encode_rows`), its level 0 as one node (:func:`encode_node`), or a z-slab of
 a large object collapsed for its coarser levels (:func:`collapse_slab`), and the
 plans that put their results together (:func:`object_tasks`, :class:`Rows`).
 """
@@ -19,7 +19,7 @@ import numpy as np
 
 from ...atomic import DISK_FULL_ERRNOS, disk_full_error
 from ...errors import IsoconvertError, OutputError
-from ...mesh import Mesh, MeshParts, meeting_rows, outward_float32, slab_split
+from ...mesh import Mesh, MeshParts, meeting_counts, meeting_rows, outward_float32, slab_split
 from .fragments import assemble, dracopy, encode_levels, encoded
 from .octree import (
     Octree,
@@ -51,6 +51,13 @@ ObjectMap = Callable[[Callable[..., tuple], Iterable[tuple[str, tuple, bool]]], 
 LARGE_OBJECT = 1 << 19
 SLAB_TRIANGLES = 1 << 18
 
+#: Triangles up to which neighbouring rows of an object's level-0 nodes (one z, y
+#: after y) are one task (:func:`encode_rows`) on a cluster, where each task costs
+#: its round trips whatever its size (Dask's advice: tasks of 100 ms or more; a
+#: row of the 1.5 M-triangle ball in 64-voxel fragments takes about 35 ms, see
+#: bench/RESULTS.md); made here, each row is its own, which holds the least.
+ROW_TRIANGLES = 1 << 17
+
 
 @dataclass(frozen=True)
 class Preceding:
@@ -63,10 +70,11 @@ class Preceding:
 
 @dataclass(frozen=True)
 class Rows:
-    """An object made a row of level-0 nodes (along x) at a time: its octree, its rows'
-    count, and, with coarser levels, its slabs' count and what makes the levels
-    from their collapses (:func:`_coarse_fragments`). Made here, the tasks'
-    results are put together here; ``elsewhere`` (a cluster), the coarser levels
+    """An object made a row of level-0 nodes (along x) at a time: its octree, how
+    many tasks its rows are (:func:`row_tasks`), and, with coarser levels, its
+    slabs' count and what makes the levels from their collapses
+    (:func:`_coarse_fragments`). Made here, the tasks' results are put together
+    here; ``elsewhere`` (a cluster), the coarser levels
     are one more task, given the slabs' results, and a last task
     (:func:`assemble_object`), given the rows' and that one's, writes the object
     as an object's task does, so that only its manifest comes back."""
@@ -102,10 +110,11 @@ def object_tasks(
     :func:`encode_object` task (its whole mesh), or ``(segment, Rows)`` for an
     object given in parts that is cut into fragments with one level, or for one
     large (:data:`LARGE_OBJECT` triangles) with more, given in parts or whole
-    (:class:`_WholeParts`): level 0 is one :func:`encode_row`
-    task per row of nodes (along x) its box reaches, each made of the triangles that reach
-    the row, so that no object's whole mesh is built (the same bytes, as
-    :func:`cut_level` makes each row from those triangles alone), or, held by one
+    (:class:`_WholeParts`): level 0 is one :func:`encode_rows` task per few
+    neighbouring rows of nodes (along x) that triangles reach (:func:`row_tasks`),
+    each made of the triangles that reach them, so that no object's whole mesh is
+    built (the same bytes, as :func:`cut_level` makes each row from those
+    triangles alone), or, held by one
     node, one :func:`encode_node` task; then a large one's coarser levels are one
     :func:`collapse_slab` task per z-slab of it (:func:`_coarse_levels`); with
     ``elsewhere``, one task more makes them from the slabs' results, and one
@@ -134,7 +143,8 @@ def object_tasks(
             grid_origin, shape, cut = object_frame(lo, hi, size)
             if large or (cut and lods == 1):
                 frame = level_frame(grid_origin, shape, 0, top, lo, hi)
-                rows = node_rows(frame) if cut else range(1)
+                most = ROW_TRIANGLES if elsewhere else 0
+                rows = row_tasks(pieces, to_index, frame, most) if cut else [[]]
                 plan = Rows(shape, grid_origin, len(rows))
                 if large:  # and its slabs, collapsed for its coarser levels
                     octree = (grid_origin, shape, top, lo, hi, cut)
@@ -148,11 +158,14 @@ def object_tasks(
                     args = (whole.vertices, whole.cells, origin, inverse, grid_origin, shape, bits)
                     del whole
                     yield segment, f"object {segment}, level 0", encode_node, args
-                for row in rows if cut else ():
-                    part = pieces.reaching(to_index, *row_span(frame, row))
-                    args = (part.vertices, part.cells, origin, inverse, frame, row, bits)
-                    what = f"object {segment}, row y {row[0]} z {row[1]} of fragments"
-                    yield segment, what, encode_row, args
+                for task in rows if cut else ():
+                    low, high = row_span(frame, task[0])[0], row_span(frame, task[-1])[1]
+                    part = pieces.reaching(to_index, low, high)
+                    args = (part.vertices, part.cells, origin, inverse, frame, task, bits)
+                    (y, z), last = task[0], task[-1][0]
+                    what = f"object {segment}, row{'s' if last > y else ''} y {y}"
+                    what += f"{f'-{last}' if last > y else ''} z {z} of fragments"
+                    yield segment, what, encode_rows, args
                 for n, (slab, used, shared) in enumerate(pieces.slabs(to_index, plan.slabs)):
                     args = (slab.vertices, slab.cells, used, shared, origin, inverse, collapse)
                     yield segment, f"object {segment}, slab {n} of its levels", collapse_slab, args
@@ -172,6 +185,33 @@ def object_tasks(
         plans.append((segment, None))
         args = (mesh.vertices, mesh.cells, origin, inverse, lods, bits, size, collapse)
         yield segment, f"object {segment}", encode_object, args
+
+
+def row_tasks(
+    pieces: MeshParts, to_index: Callable, frame: Octree, most: int
+) -> list[list[tuple[int, int]]]:
+    """An object's level-0 rows of nodes (:func:`node_rows`) as tasks: the rows
+    no triangle reaches left out, and each run of neighbouring rows of one z-layer
+    (y after y) one task while the triangles reaching them (counted per row:
+    :meth:`~isoconvert.mesh.MeshParts.reaching_counts`) add up to at most
+    ``most`` (:data:`ROW_TRIANGLES` on a cluster; 0: a row a task), a row more
+    when one row alone passes it."""
+    rows = node_rows(frame)
+    lows, highs = (
+        np.array(ends) for ends in zip(*map(row_span, [frame] * len(rows), rows), strict=True)
+    )
+    tasks: list[list[tuple[int, int]]] = []
+    held = 0
+    for row, count in zip(rows, pieces.reaching_counts(to_index, lows, highs), strict=True):
+        if not count:
+            continue
+        if tasks and tasks[-1][-1][1] == row[1] and held + count <= most:
+            tasks[-1].append(row)
+            held += count
+        else:
+            tasks.append([row])
+            held = count
+    return tasks
 
 
 class _WholeParts:
@@ -202,6 +242,12 @@ class _WholeParts:
     def reaching(self, to_index: Callable, low: np.ndarray, high: np.ndarray) -> Mesh:
         self._extents(to_index)
         return self._part(meeting_rows((self._low, self._high), self._y, low, high))[0]
+
+    def reaching_counts(
+        self, to_index: Callable, lows: np.ndarray, highs: np.ndarray
+    ) -> np.ndarray:
+        self._extents(to_index)
+        return meeting_counts((self._low, self._high), self._y, lows, highs)
 
     def slabs(
         self, to_index: Callable, count: int
@@ -262,30 +308,30 @@ def encode_object(
     return encode_levels(levels, bits, dracopy(), chunk)
 
 
-def encode_row(
+def encode_rows(
     vertices: np.ndarray,
     cells: np.ndarray,
     origin: np.ndarray,
     inverse: np.ndarray,
     frame: Octree,
-    row: tuple[int, int],
+    rows: list[tuple[int, int]],
     bits: int,
 ) -> dict[tuple[int, int, int], bytes]:
-    """One row of nodes (along x) of an object's level 0, cut (:func:`cut_level`) and
+    """Rows of nodes (along x) of an object's level 0, cut (:func:`cut_level`) and
     Draco-encoded: a task of arrays and scalars, which a cluster's worker can run.
 
     Parameters
     ----------
     vertices : (V, 3) float64
-        World positions of the triangles that reach the row (and its snapping
+        World positions of the triangles that reach the rows (and their snapping
         distance), in the object's order, over its vertices in theirs.
     cells : (C, 3) int64
     origin, inverse
         As :func:`encode_object`.
     frame : Octree
         The object's level 0.
-    row : (int, int)
-        Its (y, z) position.
+    rows : list of (int, int)
+        Their (y, z) positions, of one z-layer, y increasing (:func:`row_tasks`).
     bits : int
 
     Returns
@@ -294,7 +340,7 @@ def encode_row(
         Each node's position and its Draco fragment.
     """
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
-    level = cut_level(index_of(vertices, origin, inverse), cells, frame, [row])
+    level = cut_level(index_of(vertices, origin, inverse), cells, frame, rows)
     return encoded(level, bits, dracopy())
 
 
@@ -308,7 +354,7 @@ def encode_node(
     bits: int,
 ) -> dict[tuple[int, int, int], bytes]:
     """Level 0 of an object held by one node (its box, ``grid_origin`` and
-    ``shape``), Draco-encoded: a task of arrays and scalars, as :func:`encode_row`.
+    ``shape``), Draco-encoded: a task of arrays and scalars, as :func:`encode_rows`.
     ``vertices`` are world positions, the rest as :func:`encode_object`'s."""
     index = index_of(vertices, origin, inverse)
     level = one_node(index, np.asarray(cells, np.int64), grid_origin, shape, float(2**bits - 1))
@@ -458,7 +504,7 @@ def index_of(world: np.ndarray, origin: np.ndarray, inverse: np.ndarray) -> np.n
 
 def write_object(target: str | None, layer: str, encode: Callable, *args) -> tuple | dict:
     """A layer's task on a cluster: ``encode(*args)``, :func:`encode_object`,
-    :func:`encode_row`, :func:`encode_node`, :func:`collapse_slab`, a large
+    :func:`encode_rows`, :func:`encode_node`, :func:`collapse_slab`, a large
     object's coarser levels from its slabs' (:func:`_coarse_fragments`) or
     :func:`assemble_object`. An object's fragment data (:func:`encode_object`'s,
     :func:`assemble_object`'s) is written by the task itself to ``target`` (in the
