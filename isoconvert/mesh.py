@@ -460,10 +460,11 @@ class MeshParts(Protocol):
 
 
 def slab_split(
-    low: np.ndarray, corners: np.ndarray, count: int
+    low: np.ndarray, corners: np.ndarray, count: int, offset: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """Faces in ``count`` z-slabs (:meth:`MeshParts.slabs`): equal ranges of each
-    face's lowest z.
+    face's lowest z; with an ``offset`` (a fraction of a slab, below 1) their
+    bounds moved up by that much, a slab more (the first and last shorter).
 
     Parameters
     ----------
@@ -472,28 +473,31 @@ def slab_split(
     corners : (F, k) int64
         Its vertices' ids.
     count : int
+    offset : float
 
     Returns
     -------
     order : (F,) int64
         The faces slab by slab, in their order within each.
-    ends : (count + 1,) int64
+    ends : (S + 1,) int64
         Where each slab's faces start in ``order`` (and the last ends).
     shared : (N,) bool
         Which vertex ids, from ``base``, more than one slab's faces use.
     base : int
         The smallest id.
     """
+    slabs = count + 1 if offset > 0 else count
     slab = np.zeros(len(low), dtype=np.int64)
     span = float(np.ptp(low)) if len(low) else 0.0
     if span > 0:
-        slab = np.minimum(((low - low.min()) / span * count).astype(np.int64), count - 1)
+        where = (low - low.min()) / span * count + offset
+        slab = np.minimum(where.astype(np.int64), slabs - 1)
     order = np.argsort(slab, kind="stable")
-    ends = np.searchsorted(slab[order], np.arange(count + 1))
+    ends = np.searchsorted(slab[order], np.arange(slabs + 1))
     base = int(corners.min()) if len(corners) else 0
     seen = np.zeros(int(corners.max()) - base + 1 if len(corners) else 0, dtype=bool)
     shared = np.zeros_like(seen)
-    for n in range(count):
+    for n in range(slabs):
         ids = np.unique(corners[order[ends[n] : ends[n + 1]]]) - base
         shared[ids] |= seen[ids]
         seen[ids] = True

@@ -651,7 +651,8 @@ def test_large_objects_coarser_levels_are_collapsed_in_slabs_within_their_bound(
 ):
     """Objects above LARGE_OBJECT triangles given in parts, cut into fragments or
     not: no label's whole surface is collapsed (each collapse gets one slab, or
-    the slabs' union, fewer triangles than the label's), nor, cut, built; cloud-
+    the slabs' union, or one slab of it when it is large itself, fewer triangles
+    than the label's), nor, cut, built; cloud-
     volume reads each coarser level closed, with fewer triangles than the level
     above, and within its bound of level 0 both ways (plus a quantization step)."""
     from isoconvert.writers.precomputed import tasks as precomputed
@@ -682,16 +683,30 @@ def test_large_objects_coarser_levels_are_collapsed_in_slabs_within_their_bound(
                       chunk=chunk, parts=parts, object_threads=1)  # fmt: skip
     # uncut, level 0 is one fragment of the whole surface
     assert built == ([] if chunk else list(sizes))
+    unions_in_slabs = 0
     for label, count in sizes.items():
-        slabs = [(n, bound) for n, bound, locked in inputs[label] if locked]
-        unions = [(n, bound) for n, bound, locked in inputs[label] if not locked]
-        # every triangle in one slab; one union per coarser level, its triangles fewer
-        assert len(slabs) >= 3 and sum(n for n, _ in slabs) == count
-        assert max(n for n, _ in slabs) < count
-        assert len(unions) == 2 and len({n for n, _ in unions}) == 1 and unions[0][0] < count
+        calls = inputs[label]  # in order: the slabs', then each level's union's
+        first = next(k for k in range(len(calls) + 1) if sum(n for n, _, _ in calls[:k]) >= count)
+        slabs, rest = calls[:first], calls[first:]
+        # every triangle in one slab, each slab with its shared vertices kept
+        assert len(slabs) >= 3 and sum(n for n, _, _ in slabs) == count
+        assert max(n for n, _, _ in slabs) < count and all(locked for *_, locked in slabs)
+        # then for each coarser level the slabs' union, fewer triangles: whole, or
+        # (above LARGE_OBJECT) in slabs again, each with its shared vertices kept;
         # the bounds add up to each level's: the slabs' and then the union's
-        (slab_bound,) = {bound for _, bound in slabs}
-        assert [slab_bound + bound for _, bound in unions] == [1.0, 2.0]
+        (slab_bound,) = {bound for _, bound, _ in slabs}
+        stages: dict[float, list] = {}
+        for n, bound, locked in rest:
+            stages.setdefault(slab_bound + bound, []).append((n, locked))
+        assert sorted(stages) == [1.0, 2.0]
+        (union,) = {sum(n for n, _ in stage) for stage in stages.values()}
+        assert union < count
+        for stage in stages.values():
+            at_once = stage == [(union, False)]
+            assert at_once or (len(stage) > 1 and all(locked for _, locked in stage)), label
+            assert at_once == (union <= precomputed.LARGE_OBJECT), label
+            unions_in_slabs += not at_once
+    assert unions_in_slabs  # some unions were larger than LARGE_OBJECT
     cv = _cloud(layer)
     for label, mesh in whole.meshes.items():
         original = trimesh.Trimesh(_to_index(volume, np.asarray(mesh.vertices)), mesh.cells)
