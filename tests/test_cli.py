@@ -132,6 +132,13 @@ def test_missing_input(tmp_path, capsys):
     assert_no_output(tmp_path)
 
 
+def test_check_of_a_folder_says_it_is_a_folder(tmp_path, capsys):
+    """check given a folder (a precomputed layer, say) says so, not "no such file"."""
+    (tmp_path / "layer").mkdir()
+    code, _, err = run(capsys, "check", tmp_path / "layer")
+    assert_one_line_error(code, err, "layer is a folder, not a mesh file", ".ply")
+
+
 def test_raw_size_mismatch(tmp_path, capsys):
     raw = tmp_path / "v.raw"
     raw.write_bytes(bytes(100))

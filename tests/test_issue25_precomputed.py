@@ -469,6 +469,22 @@ def test_a_signal_while_the_layer_is_written_leaves_nothing(tmp_path, signum):
     assert list(out.iterdir()) == []
 
 
+def test_label_zero_as_an_object_is_refused_with_the_fix(tmp_path):
+    """--background 3 makes label 0 an object, which a layer cannot hold (0 is
+    Neuroglancer's no object): one line saying how to leave it out, nothing written."""
+    volume = np.zeros((12, 12, 12), np.uint16)
+    volume[3:8, 3:8, 3:8] = 3
+    np.save(tmp_path / "labels.npy", volume)
+    run = subprocess.run(
+        [sys.executable, "-m", "isoconvert", "convert", str(tmp_path / "labels.npy"), "--labels",
+         "--background", "3", "--format", "precomputed", "-o", str(tmp_path / "layer"), "-q"],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert run.returncode != 0 and len(run.stderr.strip().splitlines()) == 1, run.stderr
+    assert "got 0" in run.stderr and "--background 0" in run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["labels.npy"]
+
+
 def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, labelled, monkeypatch):
     import errno
     from pathlib import Path
@@ -490,7 +506,8 @@ def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, labelled, monkeypa
 
 def test_force_replaces_a_layer_never_a_folder_of_other_files(tmp_path, labelled):
     """--force on a folder that is no layer (someone's files) is a one-line error that
-    leaves every file; an empty folder and an earlier layer are replaced."""
+    leaves every file, and so is the same without --force, which it would not
+    help; an empty folder and an earlier layer are replaced."""
     _, result = labelled
     grid = next(iter(result.meshes.values())).info["grid"]
     mine = tmp_path / "documents"
@@ -510,6 +527,8 @@ def test_force_replaces_a_layer_never_a_folder_of_other_files(tmp_path, labelled
     )  # fmt: skip
     assert run.returncode != 0 and len(run.stderr.strip().splitlines()) == 1, run.stderr
     assert "not a Neuroglancer layer" in run.stderr and (mine / "sub" / "a").exists()
+    with pytest.raises(OutputError, match="not a Neuroglancer layer"):
+        write_precomputed(mine, result.meshes, grid, unit="µm")
     (tmp_path / "empty").mkdir()
     for _ in range(2):  # an empty folder, then the layer written there
         write_precomputed(tmp_path / "empty", result.meshes, grid, unit="µm", force=True)

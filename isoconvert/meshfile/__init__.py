@@ -104,6 +104,10 @@ def read_mesh(path: str | Path, format: str | None = None) -> Mesh:
     if str(path) == "-":
         return _read_stdin(format)
     path = Path(path)
+    if path.is_dir():
+        raise FormatError(
+            f"{path} is a folder, not a mesh file; give a mesh file ({', '.join(READ_SUFFIXES)})"
+        )
     if not path.is_file():
         raise InputNotFoundError(f"{path}: no such file")
     suffix = _format_suffix(path, format)

@@ -103,8 +103,8 @@ def check_layer(
         raise OutputError(f"{folder}: {parent} is not a folder; give the layer another name")
     if folder.exists() and not folder.is_dir():
         raise OutputError(f"{folder} exists and is not a layer folder; give a folder name")
-    if folder.exists() and not force:
-        raise OutputError(f"{folder} exists; pass --force to replace it")
+    # what --force would not replace is said first, so that "pass --force" is
+    # given only where it helps
     if folder.is_dir():
         inside = folder.resolve()
         for path in inputs:
@@ -115,6 +115,8 @@ def check_layer(
                     "write the layer elsewhere"
                 )
     _check_replaceable(folder)
+    if folder.exists() and not force:
+        raise OutputError(f"{folder} exists; pass --force to replace it")
 
 
 def _check_replaceable(folder: Path) -> None:
@@ -303,11 +305,15 @@ def write_precomputed(
         raise IsoconvertError("precomputed: needs the 3D grid the meshes were extracted on")
     for segment in meshes:
         if isinstance(segment, bool) or not isinstance(segment, int | np.integer) or segment < 1:
-            raise IsoconvertError(f"precomputed: segment ids must be integers > 0, got {segment!r}")
+            raise IsoconvertError(
+                f"precomputed: segment ids must be integers > 0 (Neuroglancer's 0 is no "
+                f"object), got {segment!r}; with --labels, label 0 is left out with "
+                "--background 0 (the default)"
+            )
     folder = Path(folder)
+    _check_replaceable(folder)  # first, as check_layer does
     if folder.exists() and not force:
         raise OutputError(f"{folder} exists; pass --force to replace it")
-    _check_replaceable(folder)
     transform, nm = layer_transform(clean, unit, voxel_frame=volume is not None)
     if meters_per_unit(unit) is None and on_status:
         on_status("note: the volume's unit is unknown; the layer takes one unit as 1 nm")
