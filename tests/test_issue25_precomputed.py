@@ -469,6 +469,41 @@ def test_a_signal_while_the_layer_is_written_leaves_nothing(tmp_path, signum):
     assert list(out.iterdir()) == []
 
 
+def test_an_objects_levels_end_before_its_bound_passes_it_or_its_triangles_stop_falling(
+    tmp_path,
+):
+    """--lods 12 on a 4-voxel cube and a ball 17 voxels across: each object's
+    manifest lists only levels whose bound, 2^(k-1) voxels, is shorter than the
+    object (a level allowed farther could be a point, and from level 10 on its
+    quantization step passes the object), each with fewer triangles than the level
+    before; cloud-volume reads every level closed, within its bound of level 0."""
+    z, y, x = np.mgrid[:32, :32, :32]
+    volume = np.zeros((32, 32, 32), np.uint16)
+    volume[(x - 20) ** 2 + (y - 20) ** 2 + (z - 20) ** 2 < 8.5**2] = 5
+    volume[2:6, 2:6, 2:6] = 9
+    result = label_surfaces(Volume(volume), smoothing=16)
+    layer = write_precomputed(tmp_path / "layer", result.meshes, result.grid, lods=12,
+                              collapse=_bounded)  # fmt: skip
+    cv = _cloud(layer)
+    for label in (5, 9):
+        original = trimesh.Trimesh(np.asarray(result[label].vertices), result[label].cells)
+        side = float(np.ptp(original.vertices, axis=0).max())
+        _, _, n, scales, *_ = _manifest(layer / "mesh" / f"{label}.index")
+        assert 1 <= n < 12 and list(scales) == [2.0**k for k in range(n)], label
+        assert n == 1 or 2.0 ** (n - 2) < side, label
+        faces = []
+        for lod in range(n):
+            back = cv.mesh.get(label, lod=lod)[label]
+            mesh = trimesh.Trimesh(np.asarray(back.vertices, np.float64), back.faces, process=True)
+            assert mesh.is_watertight, (label, lod)
+            faces.append(len(mesh.faces))
+            bound = (2.0 ** (lod - 1) if lod else 0.0) + 0.05 * 2.0**lod
+            _, far, _ = trimesh.proximity.closest_point(original, mesh.vertices)
+            assert far.max() <= bound, (label, lod)
+        assert (np.diff(faces) < 0).all(), (label, faces)
+    assert _manifest(layer / "mesh" / "9.index")[2] < _manifest(layer / "mesh" / "5.index")[2]
+
+
 def test_label_zero_as_an_object_is_refused_with_the_fix(tmp_path):
     """--background 3 makes label 0 an object, which a layer cannot hold (0 is
     Neuroglancer's no object): one line saying how to leave it out, nothing written."""

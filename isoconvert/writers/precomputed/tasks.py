@@ -150,7 +150,7 @@ def object_tasks(
                 if large:  # and its slabs, collapsed for its coarser levels
                     octree = (grid_origin, shape, top, lo, hi, cut)
                     # the sizes as planned here, wherever the levels are made
-                    sizes = (LARGE_OBJECT, SLAB_TRIANGLES)
+                    sizes = (LARGE_OBJECT, SLAB_TRIANGLES, triangles)
                     coarse = functools.partial(
                         _coarse_fragments, lods, collapse, octree, bits, sizes
                     )
@@ -309,8 +309,28 @@ def encode_object(
         As :func:`.layer.write_precomputed`.
     """
     full = Mesh(index_of(vertices, origin, inverse), np.asarray(cells, dtype=np.int64))
-    levels = [full] + [_collapsed(full, float(2 ** (k - 1)), collapse) for k in range(1, lods)]
+    levels = [full]
+    side = float(np.ptp(full.vertices, axis=0).max())
+    for k in range(1, lods):
+        if not coarser_level_fits(k, side):
+            break
+        level = _collapsed(full, float(2 ** (k - 1)), collapse)
+        if len(level.cells) >= len(levels[-1].cells):
+            break
+        levels.append(level)
     return encode_levels(levels, bits, dracopy(), chunk)
+
+
+def coarser_level_fits(k: int, side: float) -> bool:
+    """Whether an object ``side`` voxels long at most (its box's longest side)
+    gets a level ``k``: its bound, ``2**(k - 1)`` voxels, shorter than the object
+    (a level allowed farther could be a point; its fragment's quantization step,
+    the box of the object at level k, ``2**k`` times, over ``2**bits - 1``, passes
+    the object from level 10 on at 10 bits). An object's levels also stop at one
+    with no fewer triangles than the level before (a collapse that cannot go
+    further within its bound): Neuroglancer reads each object's own count of
+    levels from its manifest."""
+    return 2.0 ** (k - 1) < side
 
 
 def encode_rows(
@@ -454,17 +474,24 @@ def _coarse_fragments(
     collapse: Collapse,
     octree: tuple,
     bits: int,
-    sizes: tuple[int, int],
+    sizes: tuple[int, int, int],
     slabs: list[tuple],
 ) -> list[dict[tuple[int, int, int], bytes]]:
     """A large object's coarser levels from its slabs' collapses
-    (:func:`_coarse_levels`, ``sizes`` its :data:`LARGE_OBJECT` and
-    :data:`SLAB_TRIANGLES`), cut and encoded (``octree``: its grid origin, finest
-    nodes' shape, ``top``, box, and whether it is cut: else each level is one
-    fragment)."""
+    (:func:`_coarse_levels`, ``sizes`` its :data:`LARGE_OBJECT`,
+    :data:`SLAB_TRIANGLES` and level 0's triangles), cut and encoded (``octree``:
+    its grid origin, finest nodes' shape, ``top``, box, and whether it is cut: else
+    each level is one fragment), as many as :func:`coarser_level_fits` allows."""
     grid_origin, shape, top, lo, hi, cut = octree
     levels = []
-    for k, mesh in enumerate(_coarse_levels(slabs, lods, collapse, sizes), start=1):
+    last = sizes[2]  # level 0's triangles
+    upto = next(
+        (k for k in range(1, lods) if not coarser_level_fits(k, float(np.max(hi - lo)))), lods
+    )
+    for k, mesh in enumerate(_coarse_levels(slabs, upto, collapse, sizes[:2]), start=1):
+        if len(mesh.cells) >= last:  # no coarser than the level before: the levels end
+            break
+        last = len(mesh.cells)
         if cut:
             frame = level_frame(grid_origin, shape, k, top, lo, hi)
             level = cut_level(mesh.vertices, mesh.cells, frame)
