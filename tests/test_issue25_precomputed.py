@@ -469,13 +469,15 @@ def test_a_signal_while_the_layer_is_written_leaves_nothing(tmp_path, signum):
     assert list(out.iterdir()) == []
 
 
+@pytest.mark.parametrize("chunk", [None, 2.0])
 def test_an_objects_levels_end_before_its_bound_passes_it_or_its_triangles_stop_falling(
-    tmp_path,
+    tmp_path, chunk
 ):
-    """--lods 12 on a 4-voxel cube and a ball 17 voxels across: each object's
-    manifest lists only levels whose bound, 2^(k-1) voxels, is shorter than the
-    object (a level allowed farther could be a point, and from level 10 on its
-    quantization step passes the object), each with fewer triangles than the level
+    """--lods 12 on a 4-voxel cube and a ball 17 voxels across, whole or cut into
+    2-voxel fragments (whose cuts add triangles): each object's manifest lists only
+    levels whose bound, 2^(k-1) voxels, is shorter than the object (a level
+    allowed farther could be a point, and from level 10 on its quantization step
+    passes the object), each with fewer triangles, as read back, than the level
     before; cloud-volume reads every level closed, within its bound of level 0."""
     z, y, x = np.mgrid[:32, :32, :32]
     volume = np.zeros((32, 32, 32), np.uint16)
@@ -483,7 +485,7 @@ def test_an_objects_levels_end_before_its_bound_passes_it_or_its_triangles_stop_
     volume[2:6, 2:6, 2:6] = 9
     result = label_surfaces(Volume(volume), smoothing=16)
     layer = write_precomputed(tmp_path / "layer", result.meshes, result.grid, lods=12,
-                              collapse=_bounded)  # fmt: skip
+                              collapse=_bounded, chunk=chunk)  # fmt: skip
     cv = _cloud(layer)
     for label in (5, 9):
         original = trimesh.Trimesh(np.asarray(result[label].vertices), result[label].cells)
@@ -502,6 +504,25 @@ def test_an_objects_levels_end_before_its_bound_passes_it_or_its_triangles_stop_
             assert far.max() <= bound, (label, lod)
         assert (np.diff(faces) < 0).all(), (label, faces)
     assert _manifest(layer / "mesh" / "9.index")[2] < _manifest(layer / "mesh" / "5.index")[2]
+
+
+@pytest.mark.parametrize("chunk", [None, 8.0])
+def test_a_level_cut_into_no_fewer_triangles_than_the_one_before_ends_the_levels(chunk):
+    """encode_levels given a level 1 with more triangles than level 0 (a sphere
+    subdivided once more) and a level 2 with fewer: the manifest lists level 0
+    alone, whole or cut, since a viewer would load more for less detail."""
+    from isoconvert.writers.precomputed.fragments import dracopy, encode_levels
+
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=20.0)
+    finer = sphere.subdivide()
+    coarse = trimesh.creation.icosahedron()
+    levels = [Mesh(np.asarray(m.vertices) * (20.0 if m is coarse else 1.0) + 24.0,
+                   np.asarray(m.faces, np.int64)) for m in (sphere, finer, coarse)]  # fmt: skip
+    manifest, _ = encode_levels(levels, 10, dracopy(), chunk)
+    (n,) = np.frombuffer(manifest, "<u4", 1, 24)
+    assert n == 1
+    manifest, _ = encode_levels([levels[0], levels[2]], 10, dracopy(), chunk)
+    assert np.frombuffer(manifest, "<u4", 1, 24)[0] == 2
 
 
 def test_label_zero_as_an_object_is_refused_with_the_fix(tmp_path):

@@ -37,7 +37,8 @@ def encode_levels(
     ``chunk`` is None or the object fits in one, the object's bounding box: then
     every level is a single fragment. Otherwise each level's mesh is cut at the
     planes of its nodes' 2x2x2 partition and its triangles go to the node holding
-    their centroid, one row of nodes (along x) at a time (:func:`cut_level`).
+    their centroid, one row of nodes (along x) at a time (:func:`cut_level`). The
+    levels end at one with no fewer triangles, cut, than the one before.
     """
     lo = np.min([m.vertices.min(axis=0) for m in levels], axis=0)
     hi = np.max([m.vertices.max(axis=0) for m in levels], axis=0)
@@ -47,13 +48,19 @@ def encode_levels(
     for k, mesh in enumerate(levels):
         vertices, cells = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.cells, np.int64)
         if cut:
-            nodes.append(
-                cut_level(vertices, cells, level_frame(grid_origin, shape, k, top, lo, hi))
-            )
-            continue
-        # the level lies in the first node (its box is the object's): one fragment
-        nodes.append(one_node(vertices, cells, grid_origin, shape * 2.0**k, top))
+            level = cut_level(vertices, cells, level_frame(grid_origin, shape, k, top, lo, hi))
+        else:  # the level lies in the first node (its box is the object's): one fragment
+            level = one_node(vertices, cells, grid_origin, shape * 2.0**k, top)
+        # a level cut into no fewer triangles than the level before ends the levels
+        if nodes and level_triangles(level) >= level_triangles(nodes[-1]):
+            break
+        nodes.append(level)
     return assemble([encoded(level, bits, draco) for level in nodes], shape, grid_origin)
+
+
+def level_triangles(level: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]) -> int:
+    """How many triangles a level's fragments hold (:func:`.octree.cut_level`'s)."""
+    return sum(len(cells) for _, cells in level.values())
 
 
 def assemble(

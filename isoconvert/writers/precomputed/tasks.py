@@ -21,7 +21,7 @@ from ...atomic import DISK_FULL_ERRNOS, disk_full_error
 from ...errors import IsoconvertError, OutputError
 from ...memory import release_freed_memory
 from ...mesh import Mesh, MeshParts, meeting_counts, meeting_rows, outward_float32, slab_split
-from .fragments import assemble, dracopy, encode_levels, encoded
+from .fragments import assemble, dracopy, encode_levels, encoded, level_triangles
 from .octree import (
     Octree,
     cut_level,
@@ -484,19 +484,21 @@ def _coarse_fragments(
     each level is one fragment), as many as :func:`coarser_level_fits` allows."""
     grid_origin, shape, top, lo, hi, cut = octree
     levels = []
-    last = sizes[2]  # level 0's triangles
+    previous = None  # the level before's triangles, as cut
     upto = next(
         (k for k in range(1, lods) if not coarser_level_fits(k, float(np.max(hi - lo)))), lods
     )
     for k, mesh in enumerate(_coarse_levels(slabs, upto, collapse, sizes[:2]), start=1):
-        if len(mesh.cells) >= last:  # no coarser than the level before: the levels end
+        if k == 1 and len(mesh.cells) >= sizes[2]:  # level 0's (its rows are cut elsewhere)
             break
-        last = len(mesh.cells)
         if cut:
             frame = level_frame(grid_origin, shape, k, top, lo, hi)
             level = cut_level(mesh.vertices, mesh.cells, frame)
         else:
             level = one_node(mesh.vertices, mesh.cells, grid_origin, shape * 2.0**k, top)
+        if previous is not None and level_triangles(level) >= previous:  # the levels end
+            break
+        previous = level_triangles(level)
         levels.append(encoded(level, bits, dracopy()))
         del mesh, level  # before the next level is made
     return levels
