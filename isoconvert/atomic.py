@@ -191,6 +191,21 @@ def _name_max(folder: Path) -> int:
         return 255
 
 
+#: The outputs this process has renamed into place, in order (what an interrupted
+#: run kept: :func:`finished_outputs`).
+_FINISHED: list[Path] = []
+
+
+def finished_outputs(forget: bool = False) -> list[Path]:
+    """The files and folders renamed into place so far (since ``forget``), in
+    order: a run that is stopped keeps them, whole, and says which
+    (``isoconvert.cli``, which forgets them as each command starts)."""
+    finished = list(_FINISHED)
+    if forget:
+        _FINISHED.clear()
+    return finished
+
+
 _FD_PATH = re.compile(r"^/(?:proc/self|dev)/fd/(\d+)$")
 _STD_STREAMS = {"/dev/stdout": 1, "/dev/stderr": 2}
 #: character devices written in place: the null device and terminals
@@ -310,6 +325,7 @@ def atomic_output(
             if path.exists() and (not force or not path.is_file()):
                 raise OutputError(f"{path}: appeared while writing; choose another name or retry")
             os.replace(tmp, path)
+            _FINISHED.append(path)
         else:
             _remove(tmp)
     except OSError as exc:
@@ -384,6 +400,7 @@ def _replace_folder(tmp: Path, path: Path, force: bool) -> None:
     """Rename the finished folder into place, moving an old one away only then."""
     if not (path.exists() or path.is_symlink()):
         os.replace(tmp, path)
+        _FINISHED.append(path)
         return
     if not force or not path.is_dir() or path.is_symlink():
         raise OutputError(
@@ -392,6 +409,7 @@ def _replace_folder(tmp: Path, path: Path, force: bool) -> None:
     old = Path(tempfile.mkdtemp(dir=tmp.parent, prefix=f".{path.name}.old-"))
     os.replace(path, old / path.name)
     os.replace(tmp, path)
+    _FINISHED.append(path)
     shutil.rmtree(old, ignore_errors=True)
 
 

@@ -106,6 +106,20 @@ def interrupted_line(signum: int) -> str:
     return f"isoconvert: interrupted{by}; {INTERRUPTED}"
 
 
+def assert_names_kept(line: str, signum: int, kept: list[Path]) -> None:
+    """``line`` is the interrupted line, naming how many outputs were kept (those
+    finished before the signal) and the last of them, one of ``kept``."""
+    if not kept:
+        assert line == interrupted_line(signum)
+        return
+    head = interrupted_line(signum)
+    if len(kept) == 1:
+        assert line == f"{head}; 1 output finished before it kept: {kept[0]}"
+        return
+    head += f"; {len(kept)} outputs finished before it kept, the last "
+    assert line.startswith(head) and Path(line.removeprefix(head)) in kept, line
+
+
 def group_members(pgid: int) -> list[tuple[int, str]]:
     """(pid, state) of the processes of process group ``pgid``, zombies left out
     (a zombie is dead: it runs nothing and holds no file open)."""
@@ -164,6 +178,43 @@ def test_signal_while_writing_leaves_nothing(tmp_path, big_volume, case, signum)
     assert proc.returncode == 128 + signum, err.decode()
     assert err.decode().strip().splitlines() == [interrupted_line(signum)]
     assert list(out.iterdir()) == []
+
+
+def test_an_interrupted_run_names_the_outputs_it_finished_and_kept(tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the third of five labels' files is written: those written
+    whole stay, the third leaves nothing, and the one line says how many outputs
+    were kept and names the last (the "wrote" lines come only at the end of a
+    run). Without any finished, the line is as before."""
+    import isoconvert.label_convert as label_convert
+
+    volume = np.zeros((5, 12, 12), np.uint8)
+    for n in range(5):
+        volume[n, 2:6, 2 * n + 1 : 2 * n + 2] = n + 1
+    np.save(tmp_path / "labels.npy", volume)
+    real, calls = label_convert.write_mesh, []
+
+    def write_mesh(mesh, path, **kwargs):
+        calls.append(path)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(mesh, path, **kwargs)
+
+    monkeypatch.setattr(label_convert, "write_mesh", write_mesh)
+    args = ["convert", str(tmp_path / "labels.npy"), "--labels", "-o", str(tmp_path / "m.ply")]
+    assert main([*args, "-q"]) == 130
+    # the labels are written on threads: those already started may finish
+    kept = sorted(p for p in tmp_path.iterdir() if p.suffix == ".ply")
+    assert Path(calls[2]) not in kept and 2 <= len(kept) <= 4
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".part")]
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert_names_kept(line, signal.SIGINT, kept)
+
+    def interrupted(mesh, path, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(label_convert, "write_mesh", interrupted)  # nothing finishes
+    assert main([*args, "-f", "-q"]) == 130
+    assert capsys.readouterr().err.strip().splitlines() == [interrupted_line(signal.SIGINT)]
 
 
 def test_sigterm_while_the_mesh_spills_leaves_nothing(tmp_path, big_volume):
@@ -505,8 +556,9 @@ def test_signal_while_label_files_are_written_side_by_side(tmp_path, signum):
     proc.send_signal(signum)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 128 + signum, err.decode()
-    assert err.decode().strip().splitlines() == [interrupted_line(signum)]
     written = list(out.iterdir())
+    (line,) = err.decode().strip().splitlines()
+    assert_names_kept(line, signum, written)
     assert part_files(out) == []
     assert len(written) < len(list(reference.iterdir()))  # it was stopped part of the way
     for path in written:

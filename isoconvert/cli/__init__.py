@@ -36,6 +36,7 @@ from typing import Annotated
 import typer
 
 from .. import __version__
+from ..atomic import finished_outputs
 from ..errors import IsoconvertError, one_line
 from . import display
 from .coercion import plain_coercion
@@ -262,6 +263,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     from .. import signals
 
+    finished_outputs(forget=True)  # an earlier command's, in this process
     with signals.handled():
         return _run_command(argv)
 
@@ -275,8 +277,16 @@ def _interrupted() -> int:
 
     signum = signals.received()
     by = f" ({signals.signal_name(signum)})" if signum and signum != signal.SIGINT else ""
+    # outputs finished before the signal stay, whole: say which, since the
+    # "wrote" lines come only once every output is written
+    kept = ""
+    finished = finished_outputs()
+    if finished:
+        last = f", the last {finished[-1]}" if len(finished) > 1 else f": {finished[0]}"
+        some = "1 output" if len(finished) == 1 else f"{len(finished)} outputs"
+        kept = f"; {some} finished before it kept{last}"
     with contextlib.suppress(OSError, ValueError):  # SIGHUP: the terminal may be gone
-        print(f"isoconvert: interrupted{by}; no partial output was left", file=sys.stderr)
+        print(f"isoconvert: interrupted{by}; no partial output was left{kept}", file=sys.stderr)
     return 128 + (signum or signal.SIGINT)
 
 
