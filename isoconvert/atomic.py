@@ -63,7 +63,8 @@ def check_output(
         raise OutputError(f"{path}: the folder {folder} does not exist; create it first")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise OutputError(
-            f"{path}: cannot write to the folder {folder} (permission denied); choose another -o"
+            f"{path}: cannot write to the folder {folder} (permission denied); "
+            "give a path in a folder you can write to"
         )
     if stat.S_ISFIFO(_mode(path)):
         raise OutputError(
@@ -80,10 +81,15 @@ def check_output(
         )
     if path.exists() and not force:
         raise OutputError(f"{path}: already exists; pass --force to overwrite it")
-    if not probe:
-        return path
-    # permissions do not tell everything (root, read-only mounts, /proc): the
-    # temporary file the output is written to must be creatable there
+    if probe:
+        probe_folder(path, folder)
+    return path
+
+
+def probe_folder(path: str | Path, folder: Path) -> None:
+    """Fail early when files cannot be made in ``folder``, where ``path`` (a file
+    or a layer's folder) is to be written: permissions do not tell everything
+    (root, read-only mounts, /proc), so a temporary file is made and removed."""
     signals.defer()  # a signal is held until the probe is gone again
     try:
         try:
@@ -91,13 +97,12 @@ def check_output(
         except OSError as exc:
             raise OutputError(
                 f"{path}: cannot create files in the folder {folder} ({exc.strerror}); "
-                "choose another output"
+                "give a path in a folder you can write to"
             ) from None
         os.close(handle)
         os.unlink(probe)
     finally:
         signals.resume()
-    return path
 
 
 def input_file(input: str | Path) -> list[Path]:
@@ -366,7 +371,10 @@ def atomic_folder(path: str | Path, force: bool = False) -> Iterator[Path]:
         tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{stem}.{owner}-", suffix=".part"))
     except OSError as exc:
         signals.resume()
-        raise OutputError(f"{path}: cannot create a folder there ({exc.strerror})") from None
+        raise OutputError(
+            f"{path}: cannot create a folder there ({exc.strerror}); "
+            "give a path in a folder you can write to"
+        ) from None
     try:
         signals.resume()
         umask = os.umask(0)

@@ -245,6 +245,14 @@ def test_unwritable_output_folder(tmp_path, capsys):
     # /proc refuses new files even to root
     code, _, err = run(capsys, "convert", SPHERE, "-l", 127.5, "-o", "/proc/isoconvert-test.ply")
     assert_one_line_error(code, err, "/proc/isoconvert-test.ply", "cannot")
+    # a layer's folder there, and a report there: each says what to do, not "-o"
+    code, _, err = run(capsys, "convert", SPHERE, "-l", 127.5, "--format", "precomputed",
+                       "-o", "/proc/isoconvert-layer")  # fmt: skip
+    assert_one_line_error(code, err, "/proc/isoconvert-layer", "a folder you can write to")
+    code, _, err = run(capsys, "convert", SPHERE, "-l", 127.5, "-o", tmp_path / "o.ply",
+                       "--report", "/proc/isoconvert-r.json")  # fmt: skip
+    assert_one_line_error(code, err, "/proc/isoconvert-r.json", "cannot")
+    assert "-o" not in err.split("error: ", 1)[1] and not (tmp_path / "o.ply").exists()
     if os.geteuid() != 0:  # root ignores permission bits
         locked = tmp_path / "locked"
         locked.mkdir(mode=0o555)

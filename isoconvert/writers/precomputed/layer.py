@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_folder
+from ...atomic import atomic_folder, probe_folder
 from ...errors import FormatError, IsoconvertError, OutputError, extra_hint
 from ...geometry import normalized_grid
 from ...mesh import Mesh, MeshParts
@@ -101,6 +101,7 @@ def check_layer(
         raise OutputError(f"{folder}: the folder {parent} does not exist; create it first")
     if not parent.is_dir():
         raise OutputError(f"{folder}: {parent} is not a folder; give the layer another name")
+    probe_folder(folder, parent)  # before any work: the part folder is made there
     if folder.exists() and not folder.is_dir():
         raise OutputError(f"{folder} exists and is not a layer folder; give a folder name")
     # what --force would not replace is said first, so that "pass --force" is
