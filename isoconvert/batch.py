@@ -24,6 +24,7 @@ from .quiet import silence_third_party
 from .readers import READERS, format_suffix, is_dicom_file, unsupported_format
 from .readers.stacks import TIFF_SUFFIXES, is_zarr_store, natural_key
 from .runner import Finished, Task
+from .writers.precomputed.layer import is_layer
 
 #: Bytes of working memory a conversion needs per byte of samples (a native-order
 #: or NaN-free copy at most, vertex and triangle arrays, the writer's records),
@@ -245,6 +246,8 @@ def check_found(inputs: list[str], found: list[Found], skipped: list[Skipped]) -
 OUTPUT_FOLDER_REASON = "the output folder (-o), which is not searched for volumes"
 #: Why a preview picture (``batch --previews``) is not converted.
 PREVIEW_REASON = "a preview picture isoconvert wrote (batch --previews), not a volume"
+#: Why a Neuroglancer precomputed layer (an earlier batch's output, say) is not searched.
+LAYER_REASON = "a Neuroglancer precomputed layer (isoconvert writes these, it does not read them)"
 
 
 def _walk(root: Path, recursive: bool, excluded, found, skipped, images: bool) -> None:
@@ -268,6 +271,11 @@ def _walk(root: Path, recursive: bool, excluded, found, skipped, images: bool) -
         for d in stores:  # a Zarr store is one volume, whatever depth: never searched
             found.append(_zarr_found(Path(folder) / d, root))
         dirs[:] = [d for d in dirs if d not in stores]
+        layers = [d for d in dirs if recursive and is_layer(Path(folder) / d)]
+        for d in layers:  # one entry each, not a row for each of its files
+            count = sum(len(f) for _, _, f in os.walk(Path(folder) / d))
+            skipped.append(Skipped(str(Path(folder) / d), LAYER_REASON, count))
+        dirs[:] = [d for d in dirs if d not in layers]
         if not recursive:
             dirs[:] = []
         paths = sorted((Path(folder) / f for f in files), key=natural_key)

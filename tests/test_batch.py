@@ -66,6 +66,31 @@ def test_recursive_discovery_survives_a_symlink_loop(tree):
     assert any("already searched" in s.reason for s in skipped)
 
 
+def test_a_layer_folder_met_while_searching_is_one_skipped_entry(tree):
+    """A Neuroglancer layer an earlier run wrote into an input folder (batch -o
+    given the input folder) is one skipped entry saying what it is, not a row for
+    each of its files, and its files are never taken for volumes; a folder with
+    an info file that is not a layer's is searched as before."""
+    from isoconvert.batch import LAYER_REASON
+
+    layer = tree / "sub" / "atlas"
+    (layer / "mesh").mkdir(parents=True)
+    (layer / "info").write_text(json.dumps({"@type": "neuroglancer_multiscale_volume"}))
+    (layer / "mesh" / "info").write_text("{}")
+    (layer / "mesh" / "3.index").write_bytes(b"\0" * 12)
+    other = tree / "notes"
+    other.mkdir()
+    (other / "info").write_text("just notes")
+    found, skipped = discover([str(tree)], recursive=True)
+    assert not [f for f in found if "atlas" in str(f.relative)]
+    mine = [s for s in skipped if "atlas" in s.path]
+    assert [(s.path, s.reason, s.files) for s in mine] == [(str(layer), LAYER_REASON, 3)]
+    assert str(other / "info") in [s.path for s in skipped]
+    # not searching sub-folders, nothing is said of them
+    _, skipped = discover([str(tree)], recursive=False)
+    assert not [s for s in skipped if "atlas" in s.path or "notes/" in s.path]
+
+
 def test_glob_and_missing_inputs(tree):
     found, _ = discover([str(tree / "*.raw")])
     assert [f.relative.name for f in found] == ["ball_10x10x10_float32.raw"]

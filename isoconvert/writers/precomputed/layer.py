@@ -120,16 +120,22 @@ def check_layer(
         raise OutputError(f"{folder} exists; pass --force to replace it")
 
 
+def is_layer(folder: str | Path) -> bool:
+    """Whether ``folder`` holds a Neuroglancer precomputed layer (its ``info``
+    file names the multiscale volume type)."""
+    try:
+        info = json.loads((Path(folder) / "info").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(info, dict) and info.get("@type") == "neuroglancer_multiscale_volume"
+
+
 def _check_replaceable(folder: Path) -> None:
     """Refuse to replace a folder that is not a precomputed layer: ``--force``
     replaces a layer (or an empty folder), never a folder of someone's files."""
     if not folder.is_dir() or not any(folder.iterdir()):
         return
-    try:
-        info = json.loads((folder / "info").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        info = None
-    if not (isinstance(info, dict) and info.get("@type") == "neuroglancer_multiscale_volume"):
+    if not is_layer(folder):
         raise OutputError(
             f"{folder} is a folder that is not a Neuroglancer layer (no layer info file); "
             "--force replaces only layers: give the layer a new folder name"
