@@ -50,7 +50,7 @@ def encode_levels(
         if cut:
             level = cut_level(vertices, cells, level_frame(grid_origin, shape, k, top, lo, hi))
         else:  # the level lies in the first node (its box is the object's): one fragment
-            level = one_node(vertices, cells, grid_origin, shape * 2.0**k, top)
+            level = one_node(vertices, cells, grid_origin, shape * 2.0**k, top, merge=k > 0)
         # a level cut into no fewer triangles than the level before ends the levels
         if nodes and level_triangles(level) >= level_triangles(nodes[-1]):
             break

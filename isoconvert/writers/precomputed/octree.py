@@ -79,10 +79,18 @@ def level_frame(
 
 
 def one_node(
-    vertices: np.ndarray, cells: np.ndarray, grid_origin: np.ndarray, node: np.ndarray, top: float
+    vertices: np.ndarray,
+    cells: np.ndarray,
+    grid_origin: np.ndarray,
+    node: np.ndarray,
+    top: float,
+    merge: bool = False,
 ) -> dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]:
     """A level held by its octree's first node (of shape ``node``): its quantized
-    vertices and triangles."""
+    vertices and triangles; with ``merge`` (a coarser level), corners that
+    quantize to one position made one vertex as a cut level's are
+    (:func:`merged_positions`), else every triangle kept (level 0, which keeps
+    the mesh's triangle count)."""
     if np.bincount(cells.reshape(-1), minlength=len(vertices)).all():
         # every vertex used (as extracted and decimated meshes are): what
         # np.unique would give, without sorting 3C indices
@@ -90,7 +98,45 @@ def one_node(
     else:
         used, local = np.unique(cells, return_inverse=True)
     q = np.clip(np.rint((vertices[used] - grid_origin) / node * top), 0, top)
-    return {(0, 0, 0): (q.astype(np.uint32), local.reshape(-1, 3).astype(np.uint32))}
+    local = local.reshape(-1, 3)
+    if merge:
+        q, local = merged_positions(q, local)
+    return {(0, 0, 0): (q.astype(np.uint32), local.astype(np.uint32))}
+
+
+def merged_positions(q: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A fragment's corners that quantize to one position made one vertex: the
+    triangles between them (no area) go, and so does each pair of triangles left
+    over the same three vertices (a fin, where a pinch of the surface folded
+    onto itself: the two cancel, and the rest stays closed). On a seam both
+    fragments see the same positions, so they merge alike and the seam stays
+    closed.
+
+    Parameters
+    ----------
+    q : (V, 3) float64
+        Quantized positions (integers up to 65535).
+    corners : (C, 3) int64
+
+    Returns
+    -------
+    q : (V', 3) int64
+        The distinct positions, in np.unique's order.
+    corners : (C', 3) int64
+    """
+    # one key per position, in the order np.unique(q, axis=0) gives, faster
+    keys = q.astype(np.int64)
+    keys, same = np.unique(keys[:, 0] << 32 | keys[:, 1] << 16 | keys[:, 2], return_inverse=True)
+    q = np.stack([keys >> 32, (keys >> 16) & 0xFFFF, keys & 0xFFFF], axis=1)
+    corners = same.reshape(-1)[corners.reshape(-1, 3)]
+    corners = corners[(corners[:, 0] != corners[:, 1]) & (corners[:, 1] != corners[:, 2])
+                      & (corners[:, 0] != corners[:, 2])]  # fmt: skip
+    if len(corners):
+        _, which, count = np.unique(
+            np.sort(corners, axis=1), axis=0, return_inverse=True, return_counts=True
+        )
+        corners = corners[count[which.reshape(-1)] % 2 == 1]  # pairs cancel, in order
+    return q, corners
 
 
 def cut_level(
@@ -156,17 +202,8 @@ def cut_level(
             origin = frame.origin + where[a] * frame.node
             q = np.clip(np.rint((part[kept] - origin) / frame.node * frame.top), 0, frame.top)
             # corners the cuts left within a step of each other share a quantized
-            # position: one vertex, and the triangles between them (no area) go;
-            # on a seam both fragments see the same positions, so they merge alike
-            # and the seam stays closed
-            # (one key per position, in the order np.unique(q, axis=0) gives, faster)
-            keys = q.astype(np.int64)
-            keys, same = np.unique(keys[:, 0] << 32 | keys[:, 1] << 16 | keys[:, 2],
-                                   return_inverse=True)  # fmt: skip
-            q = np.stack([keys >> 32, (keys >> 16) & 0xFFFF, keys & 0xFFFF], axis=1)
-            corners = same.reshape(-1)[corners.reshape(-1, 3)]
-            corners = corners[(corners[:, 0] != corners[:, 1]) & (corners[:, 1] != corners[:, 2])
-                              & (corners[:, 0] != corners[:, 2])]  # fmt: skip
+            # position: one vertex (the same on both sides of a seam)
+            q, corners = merged_positions(q, corners)
             position = tuple(int(x) for x in where[a])
             level[position] = (q.astype(np.uint32), corners.astype(np.uint32))
     return level

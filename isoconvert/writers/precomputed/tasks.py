@@ -495,7 +495,9 @@ def _coarse_fragments(
             frame = level_frame(grid_origin, shape, k, top, lo, hi)
             level = cut_level(mesh.vertices, mesh.cells, frame)
         else:
-            level = one_node(mesh.vertices, mesh.cells, grid_origin, shape * 2.0**k, top)
+            level = one_node(
+                mesh.vertices, mesh.cells, grid_origin, shape * 2.0**k, top, merge=True
+            )
         if previous is not None and level_triangles(level) >= previous:  # the levels end
             break
         previous = level_triangles(level)
