@@ -518,7 +518,8 @@ def test_an_objects_levels_end_before_its_bound_passes_it_or_its_triangles_stop_
 def test_a_level_cut_into_no_fewer_triangles_than_the_one_before_ends_the_levels(chunk):
     """encode_levels given a level 1 with more triangles than level 0 (a sphere
     subdivided once more) and a level 2 with fewer: the manifest lists level 0
-    alone, whole or cut, since a viewer would load more for less detail."""
+    alone, whole or cut, since a viewer would load more for less detail; so it
+    does for a level 1 that quantizes to a point."""
     from isoconvert.writers.precomputed.fragments import dracopy, encode_levels
 
     sphere = trimesh.creation.icosphere(subdivisions=2, radius=20.0)
@@ -531,6 +532,10 @@ def test_a_level_cut_into_no_fewer_triangles_than_the_one_before_ends_the_levels
     assert n == 1
     manifest, _ = encode_levels([levels[0], levels[2]], 10, dracopy(), chunk)
     assert np.frombuffer(manifest, "<u4", 1, 24)[0] == 2
+    # a level whose corners all quantize to one position has nothing left: it ends too
+    speck = Mesh(np.asarray(coarse.vertices) * 1e-4 + 24.0, np.asarray(coarse.faces, np.int64))
+    manifest, _ = encode_levels([levels[0], speck], 10, dracopy(), chunk)
+    assert np.frombuffer(manifest, "<u4", 1, 24)[0] == 1
 
 
 def test_label_zero_as_an_object_is_refused_with_the_fix(tmp_path):

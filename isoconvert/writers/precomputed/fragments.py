@@ -51,8 +51,9 @@ def encode_levels(
             level = cut_level(vertices, cells, level_frame(grid_origin, shape, k, top, lo, hi))
         else:  # the level lies in the first node (its box is the object's): one fragment
             level = one_node(vertices, cells, grid_origin, shape * 2.0**k, top, merge=k > 0)
-        # a level cut into no fewer triangles than the level before ends the levels
-        if nodes and level_triangles(level) >= level_triangles(nodes[-1]):
+        # a level cut into no fewer triangles than the level before ends the levels,
+        # as does one whose corners all merged away (no fragment to draw)
+        if nodes and not 0 < level_triangles(level) < level_triangles(nodes[-1]):
             break
         nodes.append(level)
     return assemble([encoded(level, bits, draco) for level in nodes], shape, grid_origin)

@@ -498,7 +498,8 @@ def _coarse_fragments(
             level = one_node(
                 mesh.vertices, mesh.cells, grid_origin, shape * 2.0**k, top, merge=True
             )
-        if previous is not None and level_triangles(level) >= previous:  # the levels end
+        # no fewer triangles, cut, than the level before, or none left: the levels end
+        if not 0 < level_triangles(level) < (np.inf if previous is None else previous):
             break
         previous = level_triangles(level)
         levels.append(encoded(level, bits, dracopy()))
