@@ -514,16 +514,25 @@ def outward_float32(low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.n
     return low32, high32
 
 
-def meeting_rows(
+def meeting_each(
     z: tuple[np.ndarray, np.ndarray],
     y: tuple[np.ndarray, np.ndarray],
-    low: np.ndarray,
-    high: np.ndarray,
-) -> np.ndarray:
-    """Which faces' z-ranges ``z`` and y-ranges ``y`` (float32 from
-    :func:`outward_float32`) meet the box ``low``..``high`` ((3,) each, x not
-    looked at): what :meth:`MeshParts.reaching` selects, (F,) bool."""
-    return (z[1] >= low[2]) & (z[0] <= high[2]) & (y[1] >= low[1]) & (y[0] <= high[1])
+    lows: np.ndarray,
+    highs: np.ndarray,
+) -> Iterator[np.ndarray]:
+    """For each box ``lows[r]`` to ``highs[r]`` ((R, 3) each, x not looked at),
+    the faces whose z-ranges ``z`` and y-ranges ``y`` (each a (low, high) pair of
+    (F,) arrays; float32 from :func:`outward_float32` for
+    :meth:`MeshParts.reaching`) meet it: (F_r,) int64, increasing. Boxes in the order
+    of a layer's rows (z-layer by z-layer): the faces meeting a z-range are found
+    once for all its boxes."""
+    at = None
+    for low, high in zip(lows, highs, strict=True):
+        if at != (low[2], high[2]):
+            at = (low[2], high[2])
+            in_z = np.flatnonzero((z[1] >= low[2]) & (z[0] <= high[2]))
+            y_low, y_high = y[0][in_z], y[1][in_z]
+        yield in_z[(y_high >= low[1]) & (y_low <= high[1])]
 
 
 def meeting_counts(
@@ -532,19 +541,8 @@ def meeting_counts(
     lows: np.ndarray,
     highs: np.ndarray,
 ) -> np.ndarray:
-    """How many faces :func:`meeting_rows` selects for each box ``lows[r]`` to
-    ``highs[r]`` ((R, 3) each): (R,) int64. Boxes in the order of a layer's rows
-    (z-layer by z-layer): the faces meeting a z-range are found once for all its
-    boxes."""
-    counts = np.zeros(len(lows), dtype=np.int64)
-    at = None
-    for r, (low, high) in enumerate(zip(lows, highs, strict=True)):
-        if at != (low[2], high[2]):
-            at = (low[2], high[2])
-            in_z = np.flatnonzero((z[1] >= low[2]) & (z[0] <= high[2]))
-            y_low, y_high = y[0][in_z], y[1][in_z]
-        counts[r] = np.count_nonzero((y_high >= low[1]) & (y_low <= high[1]))
-    return counts
+    """How many faces :func:`meeting_each` gives each box: (R,) int64."""
+    return np.fromiter(map(len, meeting_each(z, y, lows, highs)), np.int64, len(lows))
 
 
 def _import(module: str, package: str):

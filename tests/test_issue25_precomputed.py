@@ -993,6 +993,7 @@ def test_an_objects_rows_are_planned_as_tasks_of_neighbouring_rows_triangles_rea
         node_rows,
         object_frame,
         row_span,
+        row_spans,
     )
 
     volume, result = labelled
@@ -1015,7 +1016,7 @@ def test_an_objects_rows_are_planned_as_tasks_of_neighbouring_rows_triangles_rea
         frame = level_frame(grid_origin, shape, 0, 1023.0, lo, hi)
         rows = node_rows(frame)
         spans = [row_span(frame, row) for row in rows]
-        counts = parts.reaching_counts(to_index, *(np.array(e) for e in zip(*spans, strict=True)))
+        counts = parts.reaching_counts(to_index, *row_spans(frame, rows))
         for (start, end), count in zip(spans, counts, strict=True):
             assert count == len(parts.reaching(to_index, start, end).cells), label
         # rows a triangle reaches, exactly; rows nothing comes within a voxel of

@@ -95,7 +95,7 @@ from .. import _native
 from ..atomic import DiskFullError, disk_full_error, free_space
 from ..errors import LevelError, VolumeError
 from ..memory import release, release_freed_memory
-from ..mesh import Mesh, MeshSummary, meeting_counts, meeting_rows, outward_float32, slab_split
+from ..mesh import Mesh, MeshSummary, meeting_counts, meeting_each, outward_float32, slab_split
 from ..threads import kernel_threads
 from ..volume import Volume
 from .label_blocks import (
@@ -355,7 +355,7 @@ class LabelParts:
         if self._low is None:
             self.extent(to_index)
         net = self._owner._net
-        taken = np.flatnonzero(meeting_rows((self._low, self._high), self._y, low, high))
+        (taken,) = meeting_each((self._low, self._high), self._y, low[None], high[None])
         # the quads it is inside of come first, as in the whole mesh
         inside = int(np.searchsorted(taken, self._inside))
         _, _, local, verts = _native.label_mesh(

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...mesh import meeting_each
+
 #: ``--fragment-size auto`` (the default): an object of more than ``AUTO_CUT``
 #: triangles (some 600 KB of Draco at level 0) is cut into nodes of
 #: ``AUTO_FRAGMENT`` voxels a side, so that a viewer loads only the parts it shows
@@ -173,15 +175,12 @@ def cut_level(
         (:func:`node_rows`).
     """
     level: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
-    low_y, high_y = triangle_extents(vertices, cells, 1)
-    low_z, high_z = triangle_extents(vertices, cells, 2)
-    layer, in_layer = None, np.arange(0)
-    for y, z in node_rows(frame) if rows is None else rows:
-        start, end = row_span(frame, (y, z))
-        if z != layer:  # the triangles reaching this z-layer of rows, once for all of it
-            layer = z
-            in_layer = np.flatnonzero((high_z >= start[2]) & (low_z <= end[2]))
-        taken = in_layer[(high_y[in_layer] >= start[1]) & (low_y[in_layer] <= end[1])]
+    rows = node_rows(frame) if rows is None else list(rows)
+    y_range = triangle_extents(vertices, cells, 1)
+    z_range = triangle_extents(vertices, cells, 2)
+    # the triangles reaching each row, those reaching its z-layer found once
+    reaching = meeting_each(z_range, y_range, *row_spans(frame, rows))
+    for (y, z), taken in zip(rows, reaching, strict=True):
         if not len(taken):
             continue
         # the row's vertices in their order in the level (so that each cut takes
@@ -217,6 +216,12 @@ def node_rows(frame: Octree) -> list[tuple[int, int]]:
     return [
         (y, z) for z in range(first[2], span[1, 2] + 1) for y in range(first[1], span[1, 1] + 1)
     ]
+
+
+def row_spans(frame: Octree, rows: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`row_span` of each of ``rows``: their lows and highs, (R, 3) each."""
+    lows, highs = zip(*(row_span(frame, row) for row in rows), strict=True)
+    return np.array(lows), np.array(highs)
 
 
 def row_span(frame: Octree, row: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:

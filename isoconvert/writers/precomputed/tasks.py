@@ -20,7 +20,7 @@ import numpy as np
 from ...atomic import DISK_FULL_ERRNOS, disk_full_error
 from ...errors import IsoconvertError, OutputError
 from ...memory import release_freed_memory
-from ...mesh import Mesh, MeshParts, meeting_counts, meeting_rows, outward_float32, slab_split
+from ...mesh import Mesh, MeshParts, meeting_counts, meeting_each, outward_float32, slab_split
 from .fragments import assemble, dracopy, encode_levels, encoded, level_triangles
 from .octree import (
     Octree,
@@ -31,6 +31,7 @@ from .octree import (
     object_frame,
     one_node,
     row_span,
+    row_spans,
     triangle_extents,
 )
 
@@ -168,8 +169,8 @@ def object_tasks(
                     part = pieces.reaching(to_index, low, high)
                     args = (part.vertices, part.cells, origin, inverse, frame, task, bits)
                     (y, z), last = task[0], task[-1][0]
-                    what = f"object {segment}, row{'s' if last > y else ''} y {y}"
-                    what += f"{f'-{last}' if last > y else ''} z {z} of fragments"
+                    ys = f"s y {y}-{last}" if last > y else f" y {y}"
+                    what = f"object {segment}, row{ys} z {z} of fragments"
                     yield segment, what, encode_rows, args
                 for n, (slab, used, shared) in enumerate(pieces.slabs(to_index, plan.slabs)):
                     args = (slab.vertices, slab.cells, used, shared, origin, inverse, collapse)
@@ -202,9 +203,7 @@ def row_tasks(
     ``most`` (:data:`ROW_TRIANGLES` on a cluster; 0: a row a task), a row more
     when one row alone passes it."""
     rows = node_rows(frame)
-    lows, highs = (
-        np.array(ends) for ends in zip(*map(row_span, [frame] * len(rows), rows), strict=True)
-    )
+    lows, highs = row_spans(frame, rows)
     tasks: list[list[tuple[int, int]]] = []
     held = 0
     for row, count in zip(rows, pieces.reaching_counts(to_index, lows, highs), strict=True):
@@ -246,7 +245,8 @@ class _WholeParts:
 
     def reaching(self, to_index: Callable, low: np.ndarray, high: np.ndarray) -> Mesh:
         self._extents(to_index)
-        return self._part(meeting_rows((self._low, self._high), self._y, low, high))[0]
+        (taken,) = meeting_each((self._low, self._high), self._y, low[None], high[None])
+        return self._part(taken)[0]
 
     def reaching_counts(
         self, to_index: Callable, lows: np.ndarray, highs: np.ndarray
