@@ -129,14 +129,16 @@ def merged_positions(q: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np
     # one key per position, in the order np.unique(q, axis=0) gives, faster
     keys = q.astype(np.int64)
     keys, same = np.unique(keys[:, 0] << 32 | keys[:, 1] << 16 | keys[:, 2], return_inverse=True)
+    merged = len(keys) < len(q)
     q = np.stack([keys >> 32, (keys >> 16) & 0xFFFF, keys & 0xFFFF], axis=1)
     corners = same.reshape(-1)[corners.reshape(-1, 3)]
     corners = corners[(corners[:, 0] != corners[:, 1]) & (corners[:, 1] != corners[:, 2])
                       & (corners[:, 0] != corners[:, 2])]  # fmt: skip
-    if len(corners):
-        _, which, count = np.unique(
-            np.sort(corners, axis=1), axis=0, return_inverse=True, return_counts=True
-        )
+    if merged and len(corners):  # a fin needs a merge (most fragments have none)
+        ids, axis = np.sort(corners, axis=1), 0
+        if len(q) < 1 << 21:  # one int64 key a triangle: far faster than unique(axis=0)
+            ids, axis = ids[:, 0] << 42 | ids[:, 1] << 21 | ids[:, 2], None
+        _, which, count = np.unique(ids, axis=axis, return_inverse=True, return_counts=True)
         corners = corners[count[which.reshape(-1)] % 2 == 1]  # pairs cancel, in order
     return q, corners
 
