@@ -10,7 +10,7 @@ the node holding its centroid, and each node's vertices are quantized in its box
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -177,6 +177,20 @@ def cut_level(
         (:func:`node_rows`).
     """
     level: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
+    for row in cut_rows(vertices, cells, frame, rows):
+        level.update(row)
+    return level
+
+
+def cut_rows(
+    vertices: np.ndarray,
+    cells: np.ndarray,
+    frame: Octree,
+    rows: Iterable[tuple[int, int]] | None = None,
+) -> Iterator[dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]]:
+    """:func:`cut_level`'s fragments a row of nodes at a time, as each is cut (a
+    row no piece lies in gives nothing): encoded as they come, a level's peak holds
+    one row's pieces and the rows encoded before it."""
     rows = node_rows(frame) if rows is None else list(rows)
     y_range = triangle_extents(vertices, cells, 1)
     z_range = triangle_extents(vertices, cells, 2)
@@ -197,6 +211,7 @@ def cut_level(
         where, pieces = where[mine], pieces[mine]
         order = np.lexsort(where.T[::-1])
         where, pieces = where[order], pieces[order]
+        row = {}
         starts = np.flatnonzero(np.r_[True, (where[1:] != where[:-1]).any(axis=1)])
         for a, b in zip(starts, np.r_[starts[1:], len(pieces)], strict=True):
             kept, corners = np.unique(pieces[a:b], return_inverse=True)
@@ -206,8 +221,8 @@ def cut_level(
             # position: one vertex (the same on both sides of a seam)
             q, corners = merged_positions(q, corners)
             position = tuple(int(x) for x in where[a])
-            level[position] = (q.astype(np.uint32), corners.astype(np.uint32))
-    return level
+            row[position] = (q.astype(np.uint32), corners.astype(np.uint32))
+        yield row
 
 
 def node_rows(frame: Octree) -> list[tuple[int, int]]:

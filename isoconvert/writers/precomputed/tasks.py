@@ -25,6 +25,7 @@ from .fragments import assemble, dracopy, encode_levels, encoded, level_triangle
 from .octree import (
     Octree,
     cut_level,
+    cut_rows,
     fragment_size,
     level_frame,
     node_rows,
@@ -238,6 +239,8 @@ class _WholeParts:
             self._box = index.min(axis=0), index.max(axis=0)
             self._low, self._high = triangle_extents(index, self._cells, 2)
             self._y = outward_float32(*triangle_extents(index, self._cells, 1))
+            del index
+            release_freed_memory()  # the temporaries', before the rows are cut
 
     def extent(self, to_index: Callable) -> tuple[np.ndarray, np.ndarray]:
         self._extents(to_index)
@@ -259,6 +262,8 @@ class _WholeParts:
     ) -> Iterator[tuple[Mesh, np.ndarray, np.ndarray]]:
         self._extents(to_index)
         order, ends, shared, base = slab_split(self._low, self._cells, count)
+        # the slabs come after the rows: the ranges that found the rows' triangles go
+        self._low = self._high = self._y = None
         for n in range(count):
             mesh, used = self._part(order[ends[n] : ends[n + 1]])
             yield mesh, used, shared[used - base]
@@ -466,6 +471,7 @@ def _collapsed_between(mesh: Mesh, shared: np.ndarray, bound: float, collapse: C
     near = shared[mesh.cells].any(axis=1)
     kept = shared.copy()
     kept[mesh.cells[near].reshape(-1)] = True
+    release_freed_memory()  # what making the slab freed, before the collapse's peak
     return collapse(mesh, bound, kept)
 
 
@@ -491,19 +497,23 @@ def _coarse_fragments(
     for k, mesh in enumerate(_coarse_levels(slabs, upto, collapse, sizes[:2]), start=1):
         if k == 1 and len(mesh.cells) >= sizes[2]:  # level 0's (its rows are cut elsewhere)
             break
-        if cut:
+        if cut:  # encoded a row at a time, as cut (one row's pieces held, not the level's)
             frame = level_frame(grid_origin, shape, k, top, lo, hi)
-            level = cut_level(mesh.vertices, mesh.cells, frame)
+            rows = cut_rows(mesh.vertices, mesh.cells, frame)
         else:
-            level = one_node(
-                mesh.vertices, mesh.cells, grid_origin, shape * 2.0**k, top, merge=True
-            )
+            node = one_node(mesh.vertices, mesh.cells, grid_origin, shape * 2.0**k, top, merge=True)
+            rows = [node]
+        level, triangles = {}, 0
+        for row in rows:
+            triangles += level_triangles(row)
+            level.update(encoded(row, bits, dracopy()))
         # no fewer triangles, cut, than the level before, or none left: the levels end
-        if not 0 < level_triangles(level) < (np.inf if previous is None else previous):
+        if not 0 < triangles < (np.inf if previous is None else previous):
             break
-        previous = level_triangles(level)
-        levels.append(encoded(level, bits, dracopy()))
-        del mesh, level  # before the next level is made
+        previous = triangles
+        levels.append(level)
+        del mesh, rows, level  # before the next level is made
+        release_freed_memory()
     return levels
 
 
@@ -513,7 +523,8 @@ def _coarse_levels(
     """Levels 1 to ``lods - 1`` of a large object (index coordinates), never
     collapsing its whole mesh: level 1 is collapsed in z-slabs of about
     :data:`SLAB_TRIANGLES` triangles each, within half its bound of its slab
-    (:func:`collapse_slab`: ``slabs`` are their results; the vertices a slab shares
+    (:func:`collapse_slab`: ``slabs`` are their results, a list emptied once their
+    union is made, so that they are not held beside it; the vertices a slab shares
     with others, and their neighbours, kept, so that the slabs still meet and no
     two collapses join the same two shared vertices); then level k is the slabs'
     union collapsed within the rest of its bound, ``2**(k - 1) - 0.5``
@@ -524,6 +535,7 @@ def _coarse_levels(
     it rather than from level 1 keeps a quarter fewer triangles. Levels come one
     at a time, as asked for."""
     ids, positions, cells = zip(*slabs, strict=True)
+    slabs.clear()  # the slabs' results go as the union is made
     # the union, over the vertices its triangles use (a shared one, in two slabs,
     # has one position), in the order of their ids
     every, first = np.unique(np.concatenate(ids), return_index=True)
