@@ -257,20 +257,21 @@ def test_a_flat_triangle_is_flipped_into_its_neighbour_worked_by_hand():
     vertices = np.array([[0, 0, 0], [2, 0, 0], [1, 0, 0], [1, -1, 0], [2, -1, 0]], float)
     cells = np.array([[a, b, c], [b, a, d]])
     none = np.zeros(5, bool)
-    flipped = _flipped_flats(vertices, cells, none, None)
-    assert flipped.tolist() == [[a, d, c], [d, b, c]]
+    flipped, flat = _flipped_flats(vertices, cells, none, None)
+    assert flipped.tolist() == [[a, d, c], [d, b, c]] and not flat.any()
     normals = np.cross(*(vertices[flipped[:, k]] - vertices[flipped[:, 0]] for k in (1, 2)))
     assert (normals == [0, 0, 1]).all()
     # an edge c-d already in the mesh: the flip would make it non-manifold
     with_cd = np.array([[a, b, c], [b, a, d], [c, d, 4]])
-    assert (_flipped_flats(vertices, with_cd, none, None) == with_cd).all()
+    assert (_flipped_flats(vertices, with_cd, none, None)[0] == with_cd).all()
     # no neighbour across ab (an open boundary)
     alone = cells[:1]
-    assert (_flipped_flats(vertices, alone, none, None) == alone).all()
+    assert (_flipped_flats(vertices, alone, none, None)[0] == alone).all()
     fixed = np.isin(np.arange(5), [c, d])
-    assert (_flipped_flats(vertices, cells, none, fixed) == cells).all()
+    assert (_flipped_flats(vertices, cells, none, fixed)[0] == cells).all()
     own = np.isin(np.arange(5), [a, b, c])
-    assert (_flipped_flats(vertices, cells, own, None) == cells).all()
+    same, flat = _flipped_flats(vertices, cells, own, None)
+    assert (same == cells).all() and flat.tolist() == [True, False]
 
 
 def test_a_binary_masks_isosurface_collapses_without_locking_its_stairs():

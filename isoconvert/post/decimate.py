@@ -235,8 +235,8 @@ def collapse(
         stop_if_interrupted()  # on a worker thread of an interrupted run
         attempts += 1
         out, library_error = simplify(indices, positions, locked, target, limit, options)
-        out = _flipped_flats(vertices, out, guard.input_problems, fixed)
-        new_problems = guard.new_problems(out)
+        out, flat = _flipped_flats(vertices, out, guard.input_problems, fixed)
+        new_problems = guard.new_problems(out, flat)
         if new_problems.any():
             ring = guard.around(new_problems)
             locked |= guard.around(ring) if attempts >= _WIDER_FROM else ring
@@ -381,22 +381,25 @@ class _TopologyGuard:
         edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
         return np.minimum(edges[:, 0], edges[:, 1]) * self.n + np.maximum(edges[:, 0], edges[:, 1])
 
-    def _problem_vertices(self, table: dict, cells: np.ndarray) -> np.ndarray:
+    def _problem_vertices(
+        self, table: dict, cells: np.ndarray, flat: np.ndarray | None = None
+    ) -> np.ndarray:
         bad = np.zeros(self.n, dtype=bool)
         bad[cells[_fins(cells)].reshape(-1)] = True
         # zero-area triangles, as the report's no-degenerate check finds them
-        v = self.vertices
-        cross = np.cross(v[cells[:, 1]] - v[cells[:, 0]], v[cells[:, 2]] - v[cells[:, 0]])
-        bad[cells[flat_triangles(v, cells, cross)].reshape(-1)] = True
+        if flat is None:
+            flat = flat_triangles(self.vertices, cells, triangle_cross(self.vertices, cells))
+        bad[cells[flat].reshape(-1)] = True
         for name in ("non_manifold_edges", "inconsistent"):
             bad[np.asarray(table[name], dtype=np.int64).reshape(-1)] = True
         bad[np.asarray(table["non_manifold_vertices"], dtype=np.int64)] = True
         return bad
 
-    def new_problems(self, out: np.ndarray) -> np.ndarray:
-        """(V,) bool: the vertices at a problem of ``out`` that the input does not have."""
+    def new_problems(self, out: np.ndarray, flat: np.ndarray | None = None) -> np.ndarray:
+        """(V,) bool: the vertices at a problem of ``out`` that the input does not have
+        (``flat``: which of its triangles are flat, when known)."""
         table = topology(out, self.n)
-        bad = self._problem_vertices(table, out) & ~self.input_problems
+        bad = self._problem_vertices(table, out, flat) & ~self.input_problems
         boundary = np.asarray(table["boundary"], dtype=np.int64).reshape(-1, 2)
         holes = ~np.isin(self._keys(boundary), self.boundary_keys)
         bad[boundary[holes].reshape(-1)] = True
@@ -471,15 +474,20 @@ def _flipped_flats(
 
     Returns
     -------
-    (C, 3) int64
+    cells : (C, 3) int64
         The same triangles, the flipped pairs in place.
+    flat : (C,) bool
+        Which of them are still flat (:func:`~isoconvert.geometry.flat_triangles`),
+        for the topology check.
     """
     cells = cells.copy()
     n = len(vertices)
-    for _ in range(_FLIP_ROUNDS if len(cells) else 0):
-        flat = flat_triangles(vertices, cells, triangle_cross(vertices, cells))
-        flat[own[cells].all(axis=1)] = False
+    if not len(cells):
+        return cells, np.zeros(0, dtype=bool)
+    flat = flat_triangles(vertices, cells, triangle_cross(vertices, cells))
+    for _ in range(_FLIP_ROUNDS):
         ts = np.flatnonzero(flat)
+        ts = ts[~own[cells[ts]].all(axis=1)]
         if not len(ts):
             break
         corners = cells[ts]
@@ -491,13 +499,16 @@ def _flipped_flats(
         j = opposite.argmax(axis=1)
         r = np.arange(len(ts))
         c, a, b = corners[r, j], corners[r, (j + 1) % 3], corners[r, (j + 2) % 3]
-        # directed edges, one a triangle's corner to the next
-        keys = cells.reshape(-1) * n + np.roll(cells, -1, axis=1).reshape(-1)
+        # the triangles about the flats' corners hold every edge looked for: each
+        # neighbour across ab, and any edge cd (not a sort of the whole mesh's edges)
+        near = np.flatnonzero(np.isin(cells, np.concatenate([a, b, c])).any(axis=1))
+        # their directed edges, one corner to the next, and the triangle of each
+        keys = cells[near].reshape(-1) * n + np.roll(cells[near], -1, axis=1).reshape(-1)
         order = np.argsort(keys, kind="stable")
         sorted_keys = keys[order]
         first = np.searchsorted(sorted_keys, b * n + a, "left")
         single = np.searchsorted(sorted_keys, b * n + a, "right") - first == 1
-        u = order[np.minimum(first, len(keys) - 1)] // 3
+        u = near[order[np.minimum(first, len(keys) - 1)] // 3]
         other = cells[u]
         third = (other != a[:, None]) & (other != b[:, None])
         d = other[r, third.argmax(axis=1)]
@@ -515,7 +526,12 @@ def _flipped_flats(
             break
         cells[ts[pick]] = np.column_stack([a[pick], d[pick], c[pick]])
         cells[u[pick]] = np.column_stack([d[pick], b[pick], c[pick]])
-    return cells
+        # each triangle is flat or not by itself: only the flipped ones change
+        changed = np.concatenate([ts[pick], u[pick]])
+        flat[changed] = flat_triangles(
+            vertices, cells[changed], triangle_cross(vertices, cells[changed])
+        )
+    return cells, flat
 
 
 def _fins(cells: np.ndarray) -> np.ndarray:
