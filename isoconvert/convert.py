@@ -393,6 +393,8 @@ def _convert_levels_to_layer(
     for n, level in enumerate(levels, start=1):
         meshes[n], extracted[n] = _extract(volume, level, opts, on_status, progress)
     progress("writing")
+    if on_status is not None and (note := layer_budget_note(opts)):
+        on_status(note)
     grid = meshes[1].info["grid"]
     write_precomputed(
         output,
@@ -436,6 +438,19 @@ def refuse_layer_options(opts: ConvertOptions, writer: Writer | None) -> None:
     for flag, on in given.items():
         if on:  # said, not silently ignored
             raise IsoconvertError(f"{flag} is an option of --format precomputed")
+
+
+def layer_budget_note(opts: ConvertOptions) -> str | None:
+    """The note for a layer made within ``--max-memory`` that an option takes out
+    of it: with ``--fragment-size inf`` each object's level 0 is one Draco fragment
+    of its whole surface, encoded at once (the 1.5 M-triangle ball of bench_pipeline
+    peaks at 394 MB within 256M, its rows cut in 128-voxel fragments at 208 MB)."""
+    if opts.blocks.max_memory and opts.layer_fragment_size == float("inf"):
+        return (
+            "note: --fragment-size inf encodes each object's whole surface as one fragment, "
+            "which --max-memory does not bound; leave it out to cut large objects"
+        )
+    return None
 
 
 def layer_objects_on(opts: ConvertOptions, source: str):

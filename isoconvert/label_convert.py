@@ -15,6 +15,7 @@ from .convert import (
     ConvertOptions,
     ConvertResult,
     bounded_collapse,
+    layer_budget_note,
     layer_objects_on,
     read_input,
     refuse_layer_options,
@@ -170,6 +171,8 @@ def convert_labels(
                 raise EmptyMeshError(f"{volume.source}: label {label}: {text}") from None
     if writer.layer:
         progress("writing")
+        if on_status is not None and (note := layer_budget_note(opts)):
+            on_status(note)
         largest = max(surfaces.labels)
         if opts.with_volume:  # every label of the volume is stored, not only those meshed
             largest = max(largest, int(surfaces.value_range[1]))

@@ -1199,3 +1199,29 @@ def test_a_worker_that_may_not_write_the_folder_sends_the_object_back(tmp_path, 
     monkeypatch.setattr(Path, "write_bytes", refused)
     assert write_object(str(tmp_path / "3"), "layer", *task) == expected
     assert not (tmp_path / "3").exists()
+
+
+def test_fragment_size_inf_within_max_memory_says_the_budget_does_not_hold(tmp_path, capsys):
+    """--fragment-size inf encodes each object's surface as one fragment, which no
+    slab bounds: within --max-memory a note says so (for labels and for levels), and
+    only there (not in memory, not with the default fragment size)."""
+    from isoconvert.cli import main
+
+    labels = np.zeros((12, 12, 12), np.uint8)
+    labels[3:9, 3:9, 3:9] = 1
+    path = tmp_path / "cube.npy"
+    np.save(path, labels)
+    said = "--fragment-size inf encodes each object's whole surface as one fragment"
+    runs = {
+        ("--labels", "--fragment-size", "inf", "--max-memory", "64M"): True,
+        ("--level", "0.5", "--fragment-size", "inf", "--max-memory", "64M"): True,
+        ("--labels", "--fragment-size", "inf"): False,
+        ("--labels", "--max-memory", "64M"): False,
+    }
+    for n, (flags, noted) in enumerate(runs.items()):
+        layer = tmp_path / f"layer{n}"
+        assert (
+            main(["convert", str(path), "-o", str(layer), "--format", "precomputed", *flags]) == 0
+        )
+        assert (said in capsys.readouterr().err) == noted, flags
+        assert (layer / "mesh" / "info").is_file()
