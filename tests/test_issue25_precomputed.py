@@ -1225,3 +1225,30 @@ def test_fragment_size_inf_within_max_memory_says_the_budget_does_not_hold(tmp_p
         )
         assert (said in capsys.readouterr().err) == noted, flags
         assert (layer / "mesh" / "info").is_file()
+
+
+def test_a_legacy_fragment_written_in_blocks_holds_every_vertex_in_nanometres(tmp_path):
+    """The legacy fragment is written a block of rows at a time (memory.ROWS): an
+    object of more vertices than two blocks, in an oblique frame, holds its count,
+    every vertex at ``transform @ (inverse @ (world - origin))`` (numpy's matrix
+    products on the whole array, to float32 rounding) and its triangles as uint32."""
+    from isoconvert.memory import ROWS
+    from isoconvert.mesh import Mesh
+    from isoconvert.writers.precomputed.legacy import write_legacy
+
+    rng = np.random.default_rng(5)
+    n = 2 * ROWS + 123
+    world = rng.uniform(-50, 400, (n, 3))
+    cells = rng.integers(0, n, (n // 2, 3))
+    origin = np.array([3.0, -7.5, 11.25])
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    inverse = np.linalg.inv(q * [0.5, 0.8, 2.0])
+    transform = np.hstack([np.diag([4.0, 4.0, 40.0]), [[10.0], [-20.0], [30.0]]])
+    write_legacy(tmp_path, 7, Mesh(world, cells), origin, inverse, transform)
+    data = (tmp_path / "7:0:0").read_bytes()
+    assert np.frombuffer(data[:4], "<u4")[0] == n
+    nm = np.frombuffer(data[4 : 4 + 12 * n], "<f4").reshape(n, 3)
+    expected = ((world - origin) @ inverse.T) @ transform[:, :3].T + transform[:, 3]
+    assert np.allclose(nm, expected, rtol=2e-7, atol=1e-3)
+    assert (np.frombuffer(data[4 + 12 * n :], "<u4").reshape(-1, 3) == cells).all()
+    assert json.loads((tmp_path / "7:0").read_text()) == {"fragments": ["7:0:0"]}

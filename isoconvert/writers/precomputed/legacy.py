@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import IsoconvertError
+from ...memory import row_chunks
 from ...mesh import Mesh
 
 
@@ -32,18 +33,21 @@ def write_legacy(
 ) -> None:
     """One object in the legacy format: its manifest ``<id>:0`` and its one fragment
     ``<id>:0:0`` (vertex count, float32 nanometres in the layer's frame, uint32
-    triangles, all little-endian)."""
-    index = (np.asarray(mesh.vertices, dtype=np.float64) - origin) @ inverse.T
-    nm = index @ transform[:, :3].T + transform[:, 3]
+    triangles, all little-endian), written a block of rows at a time: a copy of the
+    whole mesh in each of those forms held 19 MB more than the PLY of the 1.5
+    M-triangle ball within ``--max-memory 256M`` (295 MB against 276)."""
     fragment = f"{segment}:0:0"
     manifest = json.dumps({"fragments": [fragment]}, indent=1) + "\n"
     (folder / f"{segment}:0").write_text(manifest, encoding="utf-8")
-    (folder / fragment).write_bytes(
-        b"".join(
-            [
-                np.uint32(len(nm)).astype("<u4").tobytes(),
-                nm.astype("<f4").tobytes(),
-                np.asarray(mesh.cells).astype("<u4").tobytes(),
-            ]
-        )
-    )
+    # index = inverse @ (world - origin), then the layer's affine, each point by the
+    # same operations whatever the block (no matrix product's kernel)
+    to_nm = transform[:, :3] @ inverse
+    shift = transform[:, 3]
+    with open(folder / fragment, "wb") as out:
+        out.write(np.uint32(len(mesh.vertices)).astype("<u4").tobytes())
+        for block in row_chunks(np.asarray(mesh.vertices)):
+            d = np.asarray(block, dtype=np.float64) - origin
+            nm = d[:, 0:1] * to_nm[:, 0] + d[:, 1:2] * to_nm[:, 1] + d[:, 2:3] * to_nm[:, 2]
+            out.write((nm + shift).astype("<f4").tobytes())
+        for block in row_chunks(np.asarray(mesh.cells)):
+            out.write(block.astype("<u4").tobytes())
