@@ -471,7 +471,6 @@ def _collapsed_between(mesh: Mesh, shared: np.ndarray, bound: float, collapse: C
     near = shared[mesh.cells].any(axis=1)
     kept = shared.copy()
     kept[mesh.cells[near].reshape(-1)] = True
-    release_freed_memory()  # what making the slab freed, before the collapse's peak
     return collapse(mesh, bound, kept)
 
 
