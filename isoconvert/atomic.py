@@ -211,6 +211,12 @@ def finished_outputs(forget: bool = False) -> list[Path]:
     return finished
 
 
+def note_finished(paths: Iterable[str | Path]) -> None:
+    """Add outputs another process renamed into place (a batch's workers) to
+    :func:`finished_outputs`."""
+    _FINISHED.extend(Path(path) for path in paths)
+
+
 _FD_PATH = re.compile(r"^/(?:proc/self|dev)/fd/(\d+)$")
 _STD_STREAMS = {"/dev/stdout": 1, "/dev/stderr": 2}
 #: character devices written in place: the null device and terminals

@@ -18,6 +18,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
+from .atomic import finished_outputs, note_finished
 from .convert import ConvertOptions, level_outputs
 from .errors import InputNotFoundError, IsoconvertError, OutputError, one_line, utf8_text
 from .quiet import silence_third_party
@@ -976,9 +977,19 @@ def _made(count: int, labels: bool, layer: bool) -> str:
     return f"a layer of {what}" if layer else what
 
 
-def _run_one_dict(job: dict, settings: BatchSettings) -> dict:
+def _run_one_written(job: Job, settings: BatchSettings) -> tuple[Outcome, list[str]]:
+    """:func:`run_one` in a worker (a process of ``--jobs``, a cluster's), and the
+    outputs it renamed into place (:func:`isoconvert.atomic.finished_outputs`): the
+    client names them when the batch is interrupted, as a run of one process does."""
+    finished_outputs(forget=True)  # a file's before, on this worker
+    outcome = run_one(job, settings)
+    return outcome, [str(path) for path in finished_outputs(forget=True)]
+
+
+def _run_one_dict(job: dict, settings: BatchSettings) -> tuple[dict, list[str]]:
     """Pickle-friendly wrapper for worker processes."""
-    return asdict(run_one(Job(**job), settings))
+    outcome, written = _run_one_written(Job(**job), settings)
+    return asdict(outcome), written
 
 
 def run_jobs(
@@ -1059,7 +1070,9 @@ def run_jobs(
                 message = f"{job.name}: {type(exc).__name__}: {exc}"
                 result = Outcome(job.name, job.output, "failed", message=message)
             else:
-                result = Outcome(**finished.value)
+                value, written = finished.value
+                result = Outcome(**value)
+                note_finished(written)
             if result.status == "failed":
                 files.tidy()
             done(result)
@@ -1219,7 +1232,7 @@ def run_on_cluster(
 
     files = _FileTasks(
         jobs,
-        run_one,
+        _run_one_written,
         lambda job: (sent(job), remote),
         where=sent,
         key=lambda n: f"isoconvert-file-{token}-{n}",
@@ -1263,7 +1276,8 @@ def _file_outcome(finished: Finished, job: Job, sent: Job) -> Outcome:
             f"{job.name}: the Dask worker converting it died (out of memory?), also when "
             "retried on other workers; give the workers more memory or convert it alone"
         )
-    result = finished.value
+    result, written = finished.value
+    note_finished(written)
     result.message = result.message.replace(sent.input, job.input).replace(sent.output, job.output)
     result.input, result.output = job.name, job.output
     return result

@@ -26,6 +26,7 @@ import pytest
 from conftest import dataset, small_tmpfs
 
 from isoconvert.cli import main
+from isoconvert.meshfile import read_mesh
 
 pytestmark = pytest.mark.skipif(
     not sys.platform.startswith("linux"), reason="uses /proc and tmpfs (Linux)"
@@ -265,9 +266,10 @@ def test_terminated_batch_takes_its_workers_with_it(tmp_path, big_volume, signum
         kill_group(proc.pid)
         pytest.fail("the batch's pipes stayed open 15 s after it was signalled (orphaned workers)")
     assert time.monotonic() - start_wait < 12
+    lines = err.decode().strip().splitlines()
     if signum != signal.SIGKILL:  # one line, no worker's or tracker's traceback
         assert proc.returncode == 128 + signum, err.decode()
-        assert err.decode().strip().splitlines() == [interrupted_line(signum)]
+        assert len(lines) == 1 and lines[0].startswith(interrupted_line(signum)), lines
     else:
         assert proc.returncode == -signal.SIGKILL
     deadline = time.monotonic() + 5
@@ -280,6 +282,51 @@ def test_terminated_batch_takes_its_workers_with_it(tmp_path, big_volume, signum
     left = {p.name for p in out.iterdir()} if out.is_dir() else set()
     assert not [name for name in left if name.endswith(".part")]
     assert left <= finished
+    if signum != signal.SIGKILL:  # what the line says was kept is there, whole
+        assert_names_kept_at_most(lines[0], signum, [out / name for name in left])
+
+
+def assert_names_kept_at_most(line: str, signum: int, whole: list[Path]) -> None:
+    """``line`` is the interrupted line of a batch whose workers finished ``whole``:
+    it names as kept no more of them than there are (a worker stopped between its
+    rename and its report is not counted) and, naming any, the last is one of them."""
+    head = interrupted_line(signum)
+    if line == head:
+        return
+    found = re.fullmatch(
+        re.escape(head) + r"; (\d+) outputs? finished before it kept(?:: |, the last )(.+)", line
+    )
+    assert found, line
+    assert 1 <= int(found[1]) <= len(whole) and Path(found[2]) in whole, line
+
+
+def test_an_interrupted_batch_names_the_files_its_workers_finished(tmp_path):
+    """Ctrl-C to a 2-worker batch once some files are written: the one line names
+    how many its workers had finished and the last (the workers report the files
+    they renamed into place; before, the line said nothing of them), each of them
+    whole on disk, and no partial file."""
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    for n in range(12):
+        np.save(inputs / f"g{n:02d}.npy", gyroid(96 + 8 * n))
+    out = tmp_path / "out"
+    proc = start(["batch", str(inputs), "-o", str(out), "--level", "0.1", "--jobs", "2", "-q"])
+
+    def written() -> list[Path]:
+        return [p for p in out.iterdir() if p.suffix == ".ply"] if out.is_dir() else []
+
+    wait_until(proc, lambda: len(written()) >= 2, "two finished files")
+    time.sleep(0.3)  # their workers' reports reach the batch
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    lines = err.decode().strip().splitlines()
+    assert proc.returncode == 130 and len(lines) == 1, err.decode()
+    whole = written()
+    assert lines[0] != interrupted_line(signal.SIGINT), lines[0]
+    assert_names_kept_at_most(lines[0], signal.SIGINT, whole)
+    assert not part_files(out)
+    for path in whole:
+        assert read_mesh(path).n_cells > 0
 
 
 # --- full disks ---------------------------------------------------------------------------------
