@@ -977,19 +977,16 @@ def _made(count: int, labels: bool, layer: bool) -> str:
     return f"a layer of {what}" if layer else what
 
 
-def _run_one_written(job: Job, settings: BatchSettings) -> tuple[Outcome, list[str]]:
-    """:func:`run_one` in a worker (a process of ``--jobs``, a cluster's), and the
-    outputs it renamed into place (:func:`isoconvert.atomic.finished_outputs`): the
-    client names them when the batch is interrupted, as a run of one process does."""
-    finished_outputs(forget=True)  # a file's before, on this worker
-    outcome = run_one(job, settings)
-    return outcome, [str(path) for path in finished_outputs(forget=True)]
-
-
 def _run_one_dict(job: dict, settings: BatchSettings) -> tuple[dict, list[str]]:
-    """Pickle-friendly wrapper for worker processes."""
-    outcome, written = _run_one_written(Job(**job), settings)
-    return asdict(outcome), written
+    """:func:`run_one` in a worker process of ``--jobs`` (one file at a time),
+    pickle-friendly, and the outputs it renamed into place
+    (:func:`isoconvert.atomic.finished_outputs`): the batch names them when it is
+    interrupted, as a run of one process does. A cluster's worker may run files
+    side by side on threads, which one list of the process cannot tell apart: its
+    files are not named."""
+    finished_outputs(forget=True)  # a file's before, on this worker
+    outcome = run_one(Job(**job), settings)
+    return asdict(outcome), [str(path) for path in finished_outputs(forget=True)]
 
 
 def run_jobs(
@@ -1232,7 +1229,7 @@ def run_on_cluster(
 
     files = _FileTasks(
         jobs,
-        _run_one_written,
+        run_one,
         lambda job: (sent(job), remote),
         where=sent,
         key=lambda n: f"isoconvert-file-{token}-{n}",
@@ -1276,8 +1273,7 @@ def _file_outcome(finished: Finished, job: Job, sent: Job) -> Outcome:
             f"{job.name}: the Dask worker converting it died (out of memory?), also when "
             "retried on other workers; give the workers more memory or convert it alone"
         )
-    result, written = finished.value
-    note_finished(written)
+    result = finished.value
     result.message = result.message.replace(sent.input, job.input).replace(sent.output, job.output)
     result.input, result.output = job.name, job.output
     return result
