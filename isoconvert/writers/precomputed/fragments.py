@@ -14,7 +14,7 @@ import numpy as np
 
 from ...errors import IsoconvertError, extra_hint
 from ...mesh import Mesh
-from .octree import cut_level, level_frame, object_frame, one_node
+from .octree import cut_rows, level_frame, object_frame, one_node
 
 
 def dracopy():
@@ -37,26 +37,53 @@ def encode_levels(
     ``chunk`` is None or the object fits in one, the object's bounding box: then
     every level is a single fragment. Otherwise each level's mesh is cut at the
     planes of its nodes' 2x2x2 partition and its triangles go to the node holding
-    their centroid, one row of nodes (along x) at a time (:func:`cut_level`). The
+    their centroid, one row of nodes (along x) at a time (:func:`encoded_level`). The
     levels end at one with no fewer triangles, cut, than the one before.
     """
     lo = np.min([m.vertices.min(axis=0) for m in levels], axis=0)
     hi = np.max([m.vertices.max(axis=0) for m in levels], axis=0)
     grid_origin, shape, cut = object_frame(lo, hi, chunk)
-    top = float(2**bits - 1)
-    nodes = []
+    octree = (grid_origin, shape, float(2**bits - 1), lo, hi, cut)
+    nodes: list[dict[tuple[int, int, int], bytes]] = []
+    previous = None
     for k, mesh in enumerate(levels):
         vertices, cells = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.cells, np.int64)
-        if cut:
-            level = cut_level(vertices, cells, level_frame(grid_origin, shape, k, top, lo, hi))
-        else:  # the level lies in the first node (its box is the object's): one fragment
-            level = one_node(vertices, cells, grid_origin, shape * 2.0**k, top, merge=k > 0)
-        # a level cut into no fewer triangles than the level before ends the levels,
-        # as does one whose corners all merged away (no fragment to draw)
-        if nodes and not 0 < level_triangles(level) < level_triangles(nodes[-1]):
+        level, triangles = encoded_level(vertices, cells, k, octree, bits, draco)
+        if not levels_go_on(triangles, previous):
             break
         nodes.append(level)
-    return assemble([encoded(level, bits, draco) for level in nodes], shape, grid_origin)
+        previous = triangles
+    return assemble(nodes, shape, grid_origin)
+
+
+def encoded_level(
+    vertices: np.ndarray, cells: np.ndarray, k: int, octree: tuple, bits: int, draco
+) -> tuple[dict[tuple[int, int, int], bytes], int]:
+    """Level ``k`` of an object (index coordinates) as Draco fragments, and how many
+    triangles they hold. ``octree`` is its grid origin, finest nodes' shape, ``top``,
+    box and whether it is cut: cut, the level is cut a row of nodes at a time and
+    each row encoded as it comes (:func:`.octree.cut_rows`: one row's pieces held,
+    not the level's); else it lies in the first node (its box is the object's),
+    one fragment, corners merged from level 1 on (:func:`.octree.one_node`)."""
+    grid_origin, shape, top, lo, hi, cut = octree
+    if cut:
+        rows = cut_rows(vertices, cells, level_frame(grid_origin, shape, k, top, lo, hi))
+    else:
+        rows = [one_node(vertices, cells, grid_origin, shape * 2.0**k, top, merge=k > 0)]
+    level: dict[tuple[int, int, int], bytes] = {}
+    triangles = 0
+    for row in rows:
+        triangles += level_triangles(row)
+        level.update(encoded(row, bits, draco))
+    return level, triangles
+
+
+def levels_go_on(triangles: int, previous: int | None) -> bool:
+    """Whether a level of ``triangles``, as cut, is kept after one of ``previous``
+    (None: it is level 0): one with no fewer triangles than the level before (a
+    collapse that went no further within its bound) ends the levels, as does one
+    whose corners all merged away (no fragment to draw)."""
+    return previous is None or 0 < triangles < previous
 
 
 def level_triangles(level: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]) -> int:
@@ -83,9 +110,16 @@ def assemble(
 
 
 def encoded(level: dict, bits: int, draco) -> dict[tuple[int, int, int], bytes]:
-    """A level's (or a row's) nodes' Draco fragments."""
+    """A level's (or a row's) nodes' Draco fragments. A node whose triangles all
+    merged away (a coarse level's speck, quantized to one position) has none,
+    which Draco cannot encode: it is left out, and :func:`assemble` lists it empty
+    where a finer node needs it as a parent."""
     top = float(2**bits - 1)
-    return {position: _encode(draco, *f, bits, top) for position, f in level.items()}
+    return {
+        position: _encode(draco, q, cells, bits, top)
+        for position, (q, cells) in level.items()
+        if len(cells)
+    }
 
 
 def _manifest(

@@ -21,11 +21,17 @@ from ...atomic import DISK_FULL_ERRNOS, disk_full_error
 from ...errors import IsoconvertError, OutputError
 from ...memory import release_freed_memory
 from ...mesh import Mesh, MeshParts, meeting_counts, meeting_each, outward_float32, slab_split
-from .fragments import assemble, dracopy, encode_levels, encoded, level_triangles
+from .fragments import (
+    assemble,
+    dracopy,
+    encode_levels,
+    encoded,
+    encoded_level,
+    levels_go_on,
+)
 from .octree import (
     Octree,
     cut_level,
-    cut_rows,
     fragment_size,
     level_frame,
     node_rows,
@@ -487,31 +493,21 @@ def _coarse_fragments(
     :data:`SLAB_TRIANGLES` and level 0's triangles), cut and encoded (``octree``:
     its grid origin, finest nodes' shape, ``top``, box, and whether it is cut: else
     each level is one fragment), as many as :func:`coarser_level_fits` allows."""
-    grid_origin, shape, top, lo, hi, cut = octree
     levels = []
     previous = None  # the level before's triangles, as cut
+    lo, hi = octree[3], octree[4]
     upto = next(
         (k for k in range(1, lods) if not coarser_level_fits(k, float(np.max(hi - lo)))), lods
     )
     for k, mesh in enumerate(_coarse_levels(slabs, upto, collapse, sizes[:2]), start=1):
         if k == 1 and len(mesh.cells) >= sizes[2]:  # level 0's (its rows are cut elsewhere)
             break
-        if cut:  # encoded a row at a time, as cut (one row's pieces held, not the level's)
-            frame = level_frame(grid_origin, shape, k, top, lo, hi)
-            rows = cut_rows(mesh.vertices, mesh.cells, frame)
-        else:
-            node = one_node(mesh.vertices, mesh.cells, grid_origin, shape * 2.0**k, top, merge=True)
-            rows = [node]
-        level, triangles = {}, 0
-        for row in rows:
-            triangles += level_triangles(row)
-            level.update(encoded(row, bits, dracopy()))
-        # no fewer triangles, cut, than the level before, or none left: the levels end
-        if not 0 < triangles < (np.inf if previous is None else previous):
+        level, triangles = encoded_level(mesh.vertices, mesh.cells, k, octree, bits, dracopy())
+        if not levels_go_on(triangles, previous):
             break
         previous = triangles
         levels.append(level)
-        del mesh, rows, level  # before the next level is made
+        del mesh, level  # before the next level is made
         release_freed_memory()
     return levels
 
