@@ -149,6 +149,20 @@ def resume() -> None:
         raise Interrupted(signum)
 
 
+@contextlib.contextmanager
+def held() -> Iterator[None]:
+    """:func:`defer` for the block, then :func:`resume` (the signal held raised as
+    the block ends, what it did done): for a thread pool's ``submit``, which a signal
+    can leave with its work queued but the call's future lost, or a thread started
+    but not yet noted by the pool, whose shutdown would then not wait for it: it
+    would run its call after the run said which files it kept."""
+    defer()
+    try:
+        yield
+    finally:
+        resume()
+
+
 # --- batch worker processes -------------------------------------------------------------------
 
 #: prctl(2) option: the signal the calling process gets when its parent dies.
@@ -306,6 +320,7 @@ __all__ = [
     "Interrupted",
     "defer",
     "handled",
+    "held",
     "received",
     "resume",
     "run_in_worker",

@@ -12,6 +12,7 @@ from concurrent.futures import TimeoutError as FuturesTimeout
 from typing import Any
 
 from .errors import IsoconvertError
+from .signals import held
 
 
 def available_cpus() -> int:
@@ -90,7 +91,8 @@ def threaded_in_order(
         with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="isoconvert") as pool:
             try:
                 for args in arguments:
-                    pending.append(pool.submit(function, *args))
+                    with held():  # the future noted before a signal is raised
+                        pending.append(pool.submit(function, *args))
                     if len(pending) >= window:
                         yield wait_for(pending.popleft())
                 while pending:

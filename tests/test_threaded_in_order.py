@@ -96,6 +96,44 @@ def test_an_interrupt_stops_the_calls_running_at_their_next_step():
     assert got == [0, 1, 2]
 
 
+def test_a_signal_while_a_thread_starts_leaves_no_call_running_after_the_interrupt(
+    monkeypatch,
+):
+    """SIGINT lands while submit starts the pool's second thread: the pool notes the
+    thread only once its start returns, so the interrupt once skipped it in the
+    pool's shutdown, and it ran its call after the run had said which files it kept
+    (a label file renamed into place after that line). Every call that started has
+    ended when the interrupt is raised, and nothing runs on after it."""
+    import signal
+
+    from isoconvert import signals
+
+    started, finished = [], []
+    starts = []
+    real_start = threading.Thread.start
+
+    def start_then_signal(thread):
+        real_start(thread)
+        starts.append(thread.name)
+        if thread.name.startswith("isoconvert") and len(starts) == 2:
+            signal.raise_signal(signal.SIGINT)  # handled at the next step of submit
+
+    def work(n):
+        started.append(n)
+        time.sleep(0.3)
+        finished.append(n)
+
+    monkeypatch.setattr(threading.Thread, "start", start_then_signal)
+    with signals.handled(), pytest.raises(KeyboardInterrupt):
+        list(threaded_in_order(work, ((n,) for n in range(6)), threads=2))
+    at_the_interrupt = (list(started), list(finished))
+    time.sleep(0.8)
+    assert (started, finished) == at_the_interrupt
+    assert sorted(started) == sorted(finished)
+    # the call submitted while the signal was held was not lost: it ran, or was cancelled
+    assert set(started) <= {0, 1}
+
+
 def test_label_files_written_side_by_side_equal_those_of_one_thread(tmp_path, monkeypatch):
     rng = np.random.default_rng(5)
     labels = np.zeros((24, 20, 18), np.uint8)
