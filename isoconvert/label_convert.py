@@ -197,6 +197,9 @@ def convert_labels(
             # one level cut into fragments: each label's rows from the net, never its
             # whole surface (post-processed surfaces are whole already)
             parts=surfaces.parts if meshes is None else None,
+            # the cut planes midway between samples, where an unsmoothed net's
+            # vertices lie: at --smooth 0 no triangle crosses them
+            phase=0.5,
         )
     made = surfaces.labels  # the labels extracted (``labels`` may name none)
     if not writer.layer:  # (a layer's object files are the outputs named above)

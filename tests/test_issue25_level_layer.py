@@ -62,6 +62,38 @@ def test_each_level_is_an_object_with_the_plys_surface(tmp_path):
         assert 0 < len(coarse.faces) < len(back.faces)
 
 
+def test_an_isosurface_cut_into_fragments_keeps_the_plys_triangles(tmp_path):
+    """The cut planes go through the samples: every triangle of an isosurface lies in
+    one cell between samples, so none crosses them, and level 0 in 8-voxel fragments
+    has the PLY's triangles, closed across the seams. With the planes where the
+    object's box began (a vertex between samples) the cuts added triangles; so they
+    would a label net's, whose planes lie midway between samples (checked too: at
+    --smooth 0 its vertices lie there, and its fragments keep its triangles)."""
+    _nested_balls(tmp_path / "field.npy")
+    common = {"spacing": (0.5, 0.4, 0.7), "force": True}
+    plys = convert_levels(tmp_path / "field.npy", tmp_path / "f.ply", [60.5, 30.5], **common)
+    convert_levels(tmp_path / "field.npy", tmp_path / "layer", [60.5, 30.5], format="precomputed",
+                   lods=1, fragment_size=8.0, **common)  # fmt: skip
+    cv = _cloud(tmp_path / "layer")
+    for n, ply in enumerate(plys, start=1):
+        mesh = read_mesh(ply.output)
+        back = cv.mesh.get(n, lod=0)[n]
+        union = trimesh.Trimesh(np.asarray(back.vertices, np.float64), back.faces, process=True)
+        assert len(back.faces) == mesh.n_cells and union.is_watertight
+    manifest = (tmp_path / "layer" / "mesh" / "2.index").read_bytes()
+    assert np.frombuffer(manifest, "<u4", 1, 28 + 4 + 12)[0] > 8  # cut into many fragments
+    # a label net at --smooth 0 in 8-voxel fragments: planes midway between samples
+    from isoconvert.label_convert import convert_labels
+
+    labels = (np.load(tmp_path / "field.npy") > 60.5).astype(np.uint8)
+    np.save(tmp_path / "labels.npy", labels)
+    ply = convert_labels(tmp_path / "labels.npy", tmp_path / "l.ply", label_smoothing=0)[0]
+    convert_labels(tmp_path / "labels.npy", tmp_path / "labels", label_smoothing=0,
+                   format="precomputed", lods=1, fragment_size=8.0)  # fmt: skip
+    back = _cloud(tmp_path / "labels").mesh.get(1, lod=0)[1]
+    assert len(back.faces) == read_mesh(ply.output).n_cells
+
+
 def _isoconvert(*args, cwd):
     return subprocess.run(
         [sys.executable, "-m", "isoconvert", *map(str, args)], capture_output=True, text=True,

@@ -31,7 +31,9 @@ moves a vertex by at most half a step: ``box * 2**k / (2**bits - 1) / 2``
 per axis.
 
 With ``chunk`` the octree's finest nodes are that many index units a side instead,
-and each level is cut into the nodes it crosses (:mod:`.octree`).
+and each level is cut into the nodes it crosses (:mod:`.octree`): the planes lie
+at ``phase`` of the voxel grid, through the samples for isosurfaces, whose triangles
+then stay whole at level 0 (each lies in one cell between samples).
 
 With ``sharded`` the manifests and fragments go into shard files
 (:mod:`.shards`, the identity hash).

@@ -29,11 +29,12 @@ def dracopy():
 
 
 def encode_levels(
-    levels: list[Mesh], bits: int, draco, chunk: float | None = None
+    levels: list[Mesh], bits: int, draco, chunk: float | None = None, phase: float = 0.0
 ) -> tuple[bytes, bytes]:
     """One object's manifest and fragment data.
 
-    The octree's finest nodes are ``chunk`` index units wide (cubes), or, when
+    The octree's finest nodes are ``chunk`` index units wide (cubes), their planes
+    at ``phase`` of the voxel grid (:func:`.octree.object_frame`), or, when
     ``chunk`` is None or the object fits in one, the object's bounding box: then
     every level is a single fragment. Otherwise each level's mesh is cut at the
     planes of its nodes' 2x2x2 partition and its triangles go to the node holding
@@ -42,7 +43,7 @@ def encode_levels(
     """
     lo = np.min([m.vertices.min(axis=0) for m in levels], axis=0)
     hi = np.max([m.vertices.max(axis=0) for m in levels], axis=0)
-    grid_origin, shape, cut = object_frame(lo, hi, chunk)
+    grid_origin, shape, cut = object_frame(lo, hi, chunk, phase)
     octree = (grid_origin, shape, float(2**bits - 1), lo, hi, cut)
     nodes: list[dict[tuple[int, int, int], bytes]] = []
     previous = None

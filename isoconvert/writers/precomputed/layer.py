@@ -213,6 +213,7 @@ def write_precomputed(
     map_objects: ObjectMap | None = None,
     object_threads: int | None = None,
     parts: Callable[[int], MeshParts] | None = None,
+    phase: float = 0.0,
 ) -> Path:
     """Write meshes as one Neuroglancer precomputed segmentation layer.
 
@@ -245,6 +246,10 @@ def write_precomputed(
         for objects of more than :data:`AUTO_CUT` triangles, one fragment a level
         for the others (:func:`.octree.fragment_size`). None or infinity: one
         fragment a level.
+    phase : float
+        Where the cut planes lie in the voxel grid, in index units past the
+        samples (:func:`.octree.object_frame`): 0 (isosurfaces, whose triangles
+        each lie in one cell between samples) or 0.5 (surface nets).
     sharded : bool
         Store the objects in shard files (``neuroglancer_uint64_sharded_v1``)
         instead of two files each.
@@ -375,7 +380,7 @@ def write_precomputed(
             # given its rows' fragments and its slabs' collapses by the workers
             elsewhere = map_objects is not None
             jobs = object_tasks(
-                meshes, parts, plans, origin, inverse, lods, bits, chunk, collapse, elsewhere
+                meshes, parts, plans, origin, inverse, lods, bits, chunk, collapse, elsewhere, phase
             )
             if map_objects is None:
                 # objects side by side: the coarser levels' collapses are most of the

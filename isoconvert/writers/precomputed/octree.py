@@ -56,19 +56,30 @@ class Octree:
 
 
 def object_frame(
-    lo: np.ndarray, hi: np.ndarray, chunk: float | None
+    lo: np.ndarray, hi: np.ndarray, chunk: float | None, phase: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray, bool]:
     """An object's octree: its grid origin, its finest nodes' shape, and whether
-    it is cut (``chunk`` given and the object larger than one node)."""
+    it is cut (``chunk`` given and the object larger than one node).
+
+    A cut object's grid origin is ``phase`` past a whole index below ``lo``, so that
+    with a whole ``chunk`` every plane of the cut lies at that phase of the voxel
+    grid: at 0, through the samples, which no triangle of an isosurface crosses
+    (each lies in one cell between samples), so level 0 keeps its triangles; at
+    0.5, midway, where an unsmoothed surface net's vertices lie.
+    """
     # float32 in the manifest: the box is widened so that float32 rounding of its
     # origin and shape cannot leave a vertex outside it
     origin32 = np.nextafter(lo.astype(np.float32), np.float32(-np.inf))
-    grid_origin = origin32.astype(np.float64)
     box32 = np.nextafter(
-        np.maximum(hi - grid_origin, 1e-6).astype(np.float32), np.float32(np.inf)
+        np.maximum(hi - origin32.astype(np.float64), 1e-6).astype(np.float32), np.float32(np.inf)
     ).astype(np.float64)
     cut = not (chunk is None or (box32 <= chunk).all())
-    return grid_origin, (np.full(3, float(np.float32(chunk))) if cut else box32), cut
+    if not cut:
+        return origin32.astype(np.float64), box32, cut
+    aligned = (np.floor(lo - phase) + phase).astype(np.float32)  # exact below 2**23
+    low = aligned.astype(np.float64) > lo
+    aligned[low] = np.nextafter(aligned[low], np.float32(-np.inf))
+    return aligned.astype(np.float64), np.full(3, float(np.float32(chunk))), cut
 
 
 def level_frame(
@@ -217,8 +228,10 @@ def cut_rows(
             kept, corners = np.unique(pieces[a:b], return_inverse=True)
             origin = frame.origin + where[a] * frame.node
             q = np.clip(np.rint((part[kept] - origin) / frame.node * frame.top), 0, frame.top)
-            # corners the cuts left within a step of each other share a quantized
-            # position: one vertex (the same on both sides of a seam)
+            # corners within a step of each other share a quantized position: one
+            # vertex (the same on both sides of a seam), the triangles between them
+            # gone (Draco's edgebreaker, 5-7x smaller than its sequential encoding,
+            # would drop them anyway)
             q, corners = merged_positions(q, corners)
             position = tuple(int(x) for x in where[a])
             row[position] = (q.astype(np.uint32), corners.astype(np.uint32))
@@ -271,6 +284,10 @@ def _cut_at_planes(
     vertices : (V', 3) float64
     cells : (C', 3) int64
     """
+    # the sides of each plane are taken from the snapped positions, but each cut's
+    # new vertex from where its edge crosses the plane as extracted: snapped ends
+    # would put it up to half a step off the surface, which rounding could double
+    exact = vertices.copy()
     for axis in range(3):
         step = frame.split[axis]
         first = int(np.floor((frame.lo[axis] - frame.origin[axis]) / step)) + 1
@@ -278,19 +295,19 @@ def _cut_at_planes(
         low, high = triangle_extents(vertices, cells, axis)
         for m in range(max(first, 1), last + 1):
             plane = frame.origin[axis] + m * step
-            # vertices within a quantization step of the plane go onto it first
-            # (igneous snaps too): cut there, they would leave slivers whose
-            # corners quantize to one position
-            near = np.abs(vertices[:, axis] - plane) < frame.node[axis] / frame.top
+            # vertices within half a quantization step of the plane go onto it
+            # first (igneous snaps too), where quantizing puts them anyway: cut
+            # there, they would leave slivers whose corners quantize to one position
+            near = np.abs(vertices[:, axis] - plane) <= 0.5 * frame.node[axis] / frame.top
             vertices[near, axis] = plane
-            # snapping moves a vertex towards this plane only from within a step,
-            # never across another: the extents before it still hold every
+            # snapping moves a vertex towards this plane only from within half a
+            # step, never across another: the extents before it still hold every
             # triangle that crosses the plane
             maybe = np.flatnonzero((low < plane) & (high > plane))
             if not len(maybe):
                 continue
             count = len(cells)
-            vertices, cells, kept = _cut(vertices, cells, axis, plane, maybe)
+            vertices, exact, cells, kept = _cut(vertices, exact, cells, axis, plane, maybe)
             if len(kept) != count:  # cut: the pieces' extents after the others'
                 pieces = cells[len(kept) :]
                 new_low, new_high = triangle_extents(vertices, pieces, axis)
@@ -309,26 +326,34 @@ def triangle_extents(
 
 
 def _cut(
-    vertices: np.ndarray, cells: np.ndarray, axis: int, plane: float, maybe: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    vertices: np.ndarray,
+    exact: np.ndarray,
+    cells: np.ndarray,
+    axis: int,
+    plane: float,
+    maybe: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Split the triangles that cross the plane ``x[axis] = plane`` (strictly) so
     that none does, keeping orientation.
 
     Each crossing edge gets one new vertex exactly on the plane, computed from its
-    ends in increasing index order, so the two triangles beside it share it and
-    the surface stays closed. A triangle with a corner on the plane becomes two,
-    any other crossing one three.
+    ends' ``exact`` positions in increasing index order, so the two triangles beside
+    it share it and the surface stays closed. A triangle with a corner on the plane
+    becomes two, any other crossing one three.
 
     Parameters
     ----------
     vertices : (V, 3) float64
+        The positions whose sides of the plane count (snapped).
+    exact : (V, 3) float64
+        The positions the new vertices are interpolated between (not snapped).
     cells : (C, 3) int64
     maybe : (M,) int64
         The triangles that may cross it (every other one is left as it is).
 
     Returns
     -------
-    vertices : (V + N, 3) float64
+    vertices, exact : (V + N, 3) float64
     cells : (C', 3) int64
         The triangles that do not cross, in their order, then the pieces.
     kept : (K,) int64
@@ -337,7 +362,7 @@ def _cut(
     side = np.sign(vertices[cells[maybe], axis] - plane).astype(np.int8)  # (M, 3)
     through = (side.min(axis=1) < 0) & (side.max(axis=1) > 0)
     if not through.any():
-        return vertices, cells, np.arange(len(cells))
+        return vertices, exact, cells, np.arange(len(cells))
     crossing = np.zeros(len(cells), bool)
     crossing[maybe[through]] = True
     tri, s = cells[crossing], side[through]
@@ -358,7 +383,7 @@ def _cut(
     cut = signs[:, 0] * signs[:, 1] < 0
     pairs = np.sort(edges[cut], axis=1)
     unique, inverse = np.unique(pairs, axis=0, return_inverse=True)
-    u, w = vertices[unique[:, 0]], vertices[unique[:, 1]]
+    u, w = exact[unique[:, 0]], exact[unique[:, 1]]
     t = (plane - u[:, axis]) / (w[:, axis] - u[:, axis])
     new = u + t[:, None] * (w - u)
     new[:, axis] = plane
@@ -380,4 +405,5 @@ def _cut(
         ]
     )
     kept = np.flatnonzero(~crossing)
-    return np.vstack([vertices, new]), np.vstack([cells[kept], two, three]), kept
+    pieces = np.vstack([cells[kept], two, three])
+    return np.vstack([vertices, new]), np.vstack([exact, new]), pieces, kept

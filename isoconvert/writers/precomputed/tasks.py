@@ -113,6 +113,7 @@ def object_tasks(
     chunk: float | str | None,
     collapse: Collapse | None,
     elsewhere: bool = False,
+    phase: float = 0.0,
 ) -> Iterator[tuple[int, str, Callable, tuple]]:
     """Each object's tasks, ``(segment, what, encode, args)``, an object at a time,
     its plan put in ``plans`` before them: ``(segment, None)`` for one
@@ -128,7 +129,8 @@ def object_tasks(
     :func:`collapse_slab` task per z-slab of it (:func:`_coarse_levels`); with
     ``elsewhere``, one task more makes them from the slabs' results, and one
     :func:`assemble_object` task puts the object together (:class:`Preceding`
-    arguments; else the results are put together where they come)."""
+    arguments; else the results are put together where they come). ``phase``
+    places the cut planes in the voxel grid (:func:`.octree.object_frame`)."""
     top = float(2**bits - 1)
 
     def to_index(world: np.ndarray) -> np.ndarray:
@@ -149,7 +151,7 @@ def object_tasks(
         large = pieces is not None and lods > 1 and triangles > LARGE_OBJECT
         if pieces is not None and (size is not None or large):
             lo, hi = pieces.extent(to_index)
-            grid_origin, shape, cut = object_frame(lo, hi, size)
+            grid_origin, shape, cut = object_frame(lo, hi, size, phase)
             if large or (cut and lods == 1):
                 frame = level_frame(grid_origin, shape, 0, top, lo, hi)
                 most = ROW_TRIANGLES if elsewhere else 0
@@ -196,7 +198,7 @@ def object_tasks(
             mesh = pieces.whole()
             check_mesh(segment, mesh)
         plans.append((segment, None))
-        args = (mesh.vertices, mesh.cells, origin, inverse, lods, bits, size, collapse)
+        args = (mesh.vertices, mesh.cells, origin, inverse, lods, bits, size, collapse, phase)
         yield segment, f"object {segment}", encode_object, args
 
 
@@ -303,6 +305,7 @@ def encode_object(
     bits: int,
     chunk: float | None,
     collapse: Collapse | None,
+    phase: float = 0.0,
 ) -> tuple[bytes, bytes]:
     """One object's manifest and fragment data: its levels of detail (the coarser
     ones by ``collapse``), cut and Draco-encoded (:func:`encode_levels`). A module-level
@@ -316,7 +319,7 @@ def encode_object(
     origin : (3,) float64
     inverse : (3, 3) float64
         The grid's origin and the inverse of its affine: index = inverse @ (world - origin).
-    lods, bits, chunk, collapse
+    lods, bits, chunk, collapse, phase
         As :func:`.layer.write_precomputed`.
     """
     full = Mesh(index_of(vertices, origin, inverse), np.asarray(cells, dtype=np.int64))
@@ -329,7 +332,7 @@ def encode_object(
         if len(level.cells) >= len(levels[-1].cells):
             break
         levels.append(level)
-    return encode_levels(levels, bits, dracopy(), chunk)
+    return encode_levels(levels, bits, dracopy(), chunk, phase)
 
 
 def coarser_level_fits(k: int, side: float) -> bool:
