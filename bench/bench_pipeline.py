@@ -41,6 +41,11 @@ the peer), beside the best and median times. The pipelines:
   (one legacy fragment): the peak of cutting and decimating one large object; and the
   defaults (3 levels, ``--fragment-size auto``) against one fragment a level
   (``--fragment-size inf``), in memory and within the budget.
+- ``layer-iso``: isosurfaces cut into fragments by default: the same ball's mask at
+  ``--level 0.5`` (1.5 million triangles) and the embryo at 60.5 (961,024), as a PLY
+  and as layers of one level and of the defaults (3 levels), beside zmesh +
+  cloud-volume's legacy layer of the ball's mask; level 0's triangles (decoded) are
+  printed beside the PLY's, which they equal since the cut planes go through the samples.
 - ``layer-cluster``: the same object's layer with ``--scheduler``, on a Dask cluster this
   benchmark starts (``dask scheduler`` and ``dask worker --nworkers 2 --nthreads 1`` on
   127.0.0.1), beside the same layer made in memory, with one level cut into 64-voxel
@@ -438,6 +443,71 @@ def one_object_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]
                       (commands[8].name, commands[9].name, None)]  # fmt: skip
 
 
+def layer_level0_faces(folder: Path) -> int | None:
+    """Level 0's triangles in a multi-resolution layer, over all its objects and
+    fragments (decoded with DracoPy); None if it is not one."""
+    import struct
+
+    import DracoPy
+
+    total = 0
+    for index in sorted((folder / "mesh").glob("*.index")):
+        raw = index.read_bytes()
+        (n,) = struct.unpack_from("<I", raw, 24)
+        at = 28 + 16 * n
+        (count,) = struct.unpack_from("<I", raw, at)
+        sizes = np.frombuffer(raw, "<u4", count, at + 4 * n + 12 * count)
+        data, start = (folder / "mesh" / index.stem).read_bytes(), 0
+        for size in sizes:
+            if size:
+                total += len(DracoPy.decode(data[start : start + int(size)]).faces)
+            start += int(size)
+    return total if total else None
+
+
+def iso_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list]:
+    """Isosurfaces large enough to be cut into fragments by default (the binary-mask
+    ball at 0.5 and the embryo at 60.5) to layers of one level and of the default
+    three, beside the same surface as a PLY and zmesh + cloud-volume's legacy layer
+    of the ball's mask: level 0's triangles are printed after."""
+    volume = tmp / "one_object.npy"
+    if not volume.exists():
+        np.save(volume, np.ascontiguousarray(one_object_volume().T))
+    (tmp / "zmesh_layer.py").write_text(ZMESH_LAYER)
+    embryo = DATASETS / "embryo_256x256x256_uint8.raw"
+    inputs = [("ball", [str(volume), "--level", "0.5"])]
+    if embryo.exists():
+        inputs.append(("embryo", [str(embryo), "--level", "60.5"]))
+    commands, pairs, layers = [], [], []
+    for name, given in inputs:
+        base = [exe, "convert", *given, "-f", "-q"]
+        layer = [*base, "--format", "precomputed"]
+        out = tmp / f"{name}.ply"
+        ply = Command(f"isoconvert {name} PLY", [*base, "-o", str(out)], out)
+        one = Command(
+            f"isoconvert {name} layer, 1 level", [*layer, "--lods", "1", "-o", f"{out}_1"]
+        )
+        three = Command(f"isoconvert {name} layer, defaults (3 levels)", [*layer, "-o", f"{out}_3"])
+        commands += [ply, one, three]
+        pairs.append((one.name, ply.name, None))
+        layers.append((name, ply, [Path(f"{out}_1"), Path(f"{out}_3")]))
+    peer = Command(
+        "zmesh + cloud-volume script, ball (legacy)",
+        [sys.executable, str(tmp / "zmesh_layer.py"), str(volume), str(tmp / "ball_zl")],
+    )
+    commands.append(peer)
+    pairs.append(("isoconvert ball layer, 1 level", peer.name, None))
+
+    def level0() -> None:
+        for name, ply, folders in layers:
+            counts = ply_counts(ply.output)
+            faces = [layer_level0_faces(f) for f in folders]
+            print(f"{name}: level 0 of the layers {faces[0]:,} and {faces[1]:,} triangles, "
+                  f"the PLY {counts[1]:,}")  # fmt: skip
+
+    return commands, pairs, level0
+
+
 def cluster_layer_pipeline(tmp: Path, exe: str) -> tuple[list[Command], list, object]:
     """The one object's layer made by a local Dask cluster's two workers."""
     volume = tmp / "one_object.npy"
@@ -605,6 +675,7 @@ PIPELINES = {
     ),
     "layer-many": ("15,625 small objects (200^3 uint32): a layer", many_layer_pipeline),
     "layer-one": ("one object, 1.5 M triangles (448^3 uint8): a layer", one_object_layer_pipeline),
+    "layer-iso": ("isosurfaces of 1-1.5 M triangles: layers, level 0 cut", iso_layer_pipeline),
     "layer-cluster": ("the same object's layer on a local Dask cluster", cluster_layer_pipeline),
     "normals": ("gyroid 384^3 float32 -> PLY, with and without --normals", normals_pipeline),
     "ct-print": ("chest CT -> printable STL", ct_print_pipeline),
