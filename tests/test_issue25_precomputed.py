@@ -1286,3 +1286,45 @@ def test_a_legacy_fragment_written_in_blocks_holds_every_vertex_in_nanometres(tm
     assert np.allclose(nm, expected, rtol=2e-7, atol=1e-3)
     assert (np.frombuffer(data[4 + 12 * n :], "<u4").reshape(-1, 3) == cells).all()
     assert json.loads((tmp_path / "7:0").read_text()) == {"fragments": ["7:0:0"]}
+
+
+def test_a_row_cut_a_run_of_nodes_at_a_time_gives_the_fragments_of_the_whole_row(monkeypatch):
+    """A row that many triangles reach is cut a run of its nodes (along x) at a
+    time, each run given the triangles reaching it: every node's fragment must
+    be the one the whole row gives (a run that left out a triangle reaching it
+    across its ends, or a piece whose centroid lies in the run beside it, would
+    change a fragment or lose a piece). A sphere of 5,120 triangles, 30 voxels
+    across and off the grid, in 4-voxel nodes: its rows cut whole, and cut in
+    runs of at most 64 triangles."""
+    from isoconvert.writers.precomputed import octree
+
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    vertices = np.asarray(sphere.vertices) * 15.0 + np.array([20.3, 19.1, 21.7])
+    cells = np.asarray(sphere.faces, np.int64)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    origin, shape, _ = octree.object_frame(lo, hi, 4.0)
+    frame = octree.level_frame(origin, shape, 0, 65535.0, lo, hi)
+    whole = octree.cut_level(vertices.copy(), cells, frame)
+    runs = []
+    real = octree._cut_nodes
+    monkeypatch.setattr(octree, "RUN_TRIANGLES", 64)
+    monkeypatch.setattr(octree, "_cut_nodes", lambda *args: runs.append(args[4]) or real(*args))
+    parted = octree.cut_level(vertices.copy(), cells, frame)
+    assert sum(run != (None, None) for run in runs) > 2 * len(octree.node_rows(frame))
+    assert list(parted) == list(whole) and len(whole) > 100
+    for node, (q, corners) in whole.items():
+        assert np.array_equal(parted[node][0], q) and np.array_equal(parted[node][1], corners)
+
+
+@pytest.mark.parametrize("n", [10, 100_000])
+def test_the_vertices_a_cut_takes_are_those_np_unique_gives(n):
+    """The cut's compaction of a part's vertices, by a table where that holds
+    less than a sort of every corner and by the sort elsewhere: the vertices in
+    increasing order and the triangles over them, np.unique's answer."""
+    from isoconvert.writers.precomputed.octree import _compact
+
+    cells = np.random.default_rng(n).integers(0, n, size=(500, 3))
+    used, local = _compact(cells, n)
+    expected, inverse = np.unique(cells, return_inverse=True)
+    assert np.array_equal(used, expected)
+    assert np.array_equal(local, inverse.reshape(-1, 3))

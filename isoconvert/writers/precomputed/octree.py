@@ -201,41 +201,139 @@ def cut_rows(
 ) -> Iterator[dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]]:
     """:func:`cut_level`'s fragments a row of nodes at a time, as each is cut (a
     row no piece lies in gives nothing): encoded as they come, a level's peak holds
-    one row's pieces and the rows encoded before it."""
+    one run of a row's nodes' pieces (:func:`_row_runs`) and the rows encoded
+    before it."""
     rows = node_rows(frame) if rows is None else list(rows)
     y_range = triangle_extents(vertices, cells, 1)
     z_range = triangle_extents(vertices, cells, 2)
     # the triangles reaching each row, those reaching its z-layer found once
     reaching = meeting_each(z_range, y_range, *row_spans(frame, rows))
     for (y, z), taken in zip(rows, reaching, strict=True):
-        if not len(taken):
-            continue
-        # the row's vertices in their order in the level (so that each cut takes
-        # an edge's ends in the same order in every row)
-        used, local = np.unique(cells[taken], return_inverse=True)
-        part, pieces = _cut_at_planes(vertices[used], local.reshape(-1, 3), frame)
-        centroid = part[pieces].mean(axis=1)
-        where = np.maximum(np.floor((centroid - frame.origin) / frame.node).astype(np.int64), 0)
-        mine = (where[:, 1] == y) & (where[:, 2] == z)
-        if not mine.any():  # the row's triangles are all in the rows beside it
-            continue
-        where, pieces = where[mine], pieces[mine]
-        order = np.lexsort(where.T[::-1])
-        where, pieces = where[order], pieces[order]
-        row = {}
-        starts = np.flatnonzero(np.r_[True, (where[1:] != where[:-1]).any(axis=1)])
-        for a, b in zip(starts, np.r_[starts[1:], len(pieces)], strict=True):
-            kept, corners = np.unique(pieces[a:b], return_inverse=True)
-            origin = frame.origin + where[a] * frame.node
-            q = np.clip(np.rint((part[kept] - origin) / frame.node * frame.top), 0, frame.top)
-            # corners within a step of each other share a quantized position: one
-            # vertex (the same on both sides of a seam), the triangles between them
-            # gone (Draco's edgebreaker, 5-7x smaller than its sequential encoding,
-            # would drop them anyway)
-            q, corners = merged_positions(q, corners)
-            position = tuple(int(x) for x in where[a])
-            row[position] = (q.astype(np.uint32), corners.astype(np.uint32))
-        yield row
+        row: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
+        for run, part in _row_runs(vertices, cells, taken, frame):
+            row.update(_cut_nodes(vertices, cells, frame, part, run, (y, z)))
+        if row:  # else the row's triangles are all in the rows beside it
+            yield row
+
+
+#: Triangles up to which a row's neighbouring nodes (along x) are cut together
+#: (:func:`_row_runs`): cutting holds about 100 bytes a triangle it is given, and
+#: a row can hold most of an object (a 256^3 scan's isosurface, the embryo at
+#: 60.5, in 128-voxel nodes: 837,354 of its 961,024 triangles reach one row).
+RUN_TRIANGLES = 1 << 16
+
+
+def _row_runs(
+    vertices: np.ndarray, cells: np.ndarray, taken: np.ndarray, frame: Octree
+) -> list[tuple[tuple[int | None, int | None], np.ndarray]]:
+    """A row's triangles ``taken`` split into runs of neighbouring nodes along x,
+    each reached by about :data:`RUN_TRIANGLES` of them at most (a node reached by
+    more is a run alone): each run's first and last node (None: unbounded on that
+    side) and the triangles reaching it or within a snapping distance of it,
+    increasing. How a row is split changes no fragment (:func:`_cut_nodes`)."""
+    if len(taken) <= RUN_TRIANGLES:
+        return [((None, None), taken)] if len(taken) else []
+    low, high = triangle_extents(vertices, cells[taken], 0)
+    reach = frame.node[0] / frame.top
+    span = np.floor((np.stack([frame.lo[0], frame.hi[0]]) - frame.origin[0]) / frame.node[0])
+    first, last = max(int(span[0]), 0), max(int(span[1]), 0)
+    nodes = last - first + 1
+    # how many triangles reach each node (one reaching two counts in both)
+    ends = np.floor((np.stack([low - reach, high + reach]) - frame.origin[0]) / frame.node[0])
+    ends = np.clip(ends, first, last).astype(np.int64) - first
+    count = np.cumsum(np.bincount(ends[0], minlength=nodes))
+    count[1:] -= np.cumsum(np.bincount(ends[1], minlength=nodes))[:-1]
+    del ends
+    bounds, held = [0], 0
+    for n in range(nodes):
+        if n > bounds[-1] and held + count[n] > RUN_TRIANGLES:
+            bounds.append(n)
+            held = 0
+        held += count[n]
+    runs = []
+    for a, b in zip(bounds, [*bounds[1:], nodes], strict=True):
+        # the first run unbounded below, the last above (every piece is in one)
+        near = np.ones(len(taken), dtype=bool)
+        if a > 0:
+            near &= high >= frame.origin[0] + (first + a) * frame.node[0] - reach
+        if b < nodes:
+            near &= low <= frame.origin[0] + (first + b) * frame.node[0] + reach
+        run = (first + a if a > 0 else None, first + b - 1 if b < nodes else None)
+        runs.append((run, taken[near]))
+    return runs
+
+
+def _cut_nodes(
+    vertices: np.ndarray,
+    cells: np.ndarray,
+    frame: Octree,
+    taken: np.ndarray,
+    run: tuple[int | None, int | None],
+    row: tuple[int, int],
+) -> dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]:
+    """The fragments of a row's nodes ``run`` (its first and last along x, None:
+    unbounded) at ``row`` = (y, z), from the triangles ``taken`` that reach them:
+    cut at every plane, each piece in the node of its centroid. A triangle is cut
+    the same way whichever others it is given with (each plane's cut keeps the
+    triangles' order and makes each edge's vertex from its ends in index order),
+    so a node's fragment does not depend on the run or row it is made in."""
+    # the vertices in their order in the level (so that each cut takes an edge's
+    # ends in the same order in every row)
+    used, local = _compact(cells[taken], len(vertices))
+    part, pieces = _cut_at_planes(vertices[used], local, frame)
+    del used, local
+    # each piece's node: its centroid's, ((a + b) + c) / 3 as a mean over the
+    # corners adds, an axis at a time
+    where = np.empty((len(pieces), 3), dtype=np.int64)
+    for axis in range(3):
+        x = part[:, axis]
+        centroid = (x[pieces[:, 0]] + x[pieces[:, 1]] + x[pieces[:, 2]]) / 3.0
+        centroid -= frame.origin[axis]
+        centroid /= frame.node[axis]
+        where[:, axis] = np.maximum(np.floor(centroid), 0)
+    del centroid
+    mine = (where[:, 1] == row[0]) & (where[:, 2] == row[1])
+    if run[0] is not None:
+        mine &= where[:, 0] >= run[0]
+    if run[1] is not None:
+        mine &= where[:, 0] <= run[1]
+    if not mine.any():
+        return {}
+    x, pieces = where[mine, 0], pieces[mine]
+    del where, mine
+    # the nodes along x, each's pieces in their order (the row's y and z are one)
+    order = np.argsort(x, kind="stable")
+    x, pieces = x[order], pieces[order]
+    del order
+    nodes = {}
+    starts = np.flatnonzero(np.r_[True, x[1:] != x[:-1]])
+    for a, b in zip(starts, np.r_[starts[1:], len(pieces)], strict=True):
+        kept, corners = _compact(pieces[a:b], len(part))
+        position = (int(x[a]), *row)
+        origin = frame.origin + np.array(position) * frame.node
+        q = np.clip(np.rint((part[kept] - origin) / frame.node * frame.top), 0, frame.top)
+        # corners within a step of each other share a quantized position: one
+        # vertex (the same on both sides of a seam), the triangles between them
+        # gone (Draco's edgebreaker, 5-7x smaller than its sequential encoding,
+        # would drop them anyway)
+        q, corners = merged_positions(q, corners)
+        nodes[position] = (q.astype(np.uint32), corners.astype(np.uint32))
+    return nodes
+
+
+def _compact(cells: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices (of ``n``) that triangles ``cells`` use, increasing, and the
+    triangles over them: ``np.unique(cells, return_inverse=True)``, by a table of
+    ``n`` entries rather than a sort of every corner where that holds less."""
+    if n > 8 * len(cells):  # the table would hold more than the sort
+        used, local = np.unique(cells, return_inverse=True)
+        return used, local.reshape(-1, 3)
+    mask = np.zeros(n, dtype=bool)
+    mask[cells.reshape(-1)] = True
+    used = np.flatnonzero(mask)
+    table = np.cumsum(mask) - 1
+    del mask
+    return used, table[cells]
 
 
 def node_rows(frame: Octree) -> list[tuple[int, int]]:
