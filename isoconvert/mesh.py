@@ -439,6 +439,13 @@ class MeshParts(Protocol):
         making them: what a layer plans its tasks by."""
         ...
 
+    def vertex_positions(
+        self, to_index: Callable[[np.ndarray], np.ndarray]
+    ) -> Iterator[np.ndarray]:
+        """Its vertices' ``to_index`` coordinates, each vertex once, a piece at a
+        time ((n, 3) float64 each): what a layer sizes its fragments by."""
+        ...
+
     @property
     def n_cells(self) -> int:
         """How many triangles the whole mesh has."""

@@ -696,16 +696,107 @@ def test_the_default_fragment_size_cuts_only_objects_of_many_triangles():
     a level at or below; a number is itself; inf (or None) is never a cut; and the
     option's help gives the same numbers."""
     from isoconvert.cli.options import LayerArgs
-    from isoconvert.writers.precomputed.octree import AUTO_CUT, AUTO_FRAGMENT, fragment_size
+    from isoconvert.writers.precomputed.octree import (
+        AUTO_CUT,
+        AUTO_FINEST,
+        AUTO_FRAGMENT,
+        AUTO_NODE_VERTICES,
+        fragment_size,
+    )
 
     assert (AUTO_CUT, AUTO_FRAGMENT) == (524_288, 128.0)
+    assert (AUTO_NODE_VERTICES, AUTO_FINEST) == (131_072, 32.0)
     assert fragment_size("auto", AUTO_CUT) is None
     assert fragment_size("auto", AUTO_CUT + 1) == AUTO_FRAGMENT
-    assert fragment_size(64.0, 10) == 64.0 and fragment_size(np.float32(5), 10**9) == 5.0
+    # halved while the densest node holds too many vertices, never below the finest
+    asked = []
+
+    def densest(side):
+        asked.append(side)
+        return AUTO_NODE_VERTICES + (side > 32)
+
+    assert fragment_size("auto", AUTO_CUT + 1, densest) == 32.0 and asked == [128.0, 64.0]
+    assert fragment_size("auto", AUTO_CUT, densest) is None
+    assert fragment_size("auto", AUTO_CUT + 1, lambda side: 10**9) == AUTO_FINEST
+    assert fragment_size(64.0, 10, densest) == 64.0 and fragment_size(np.float32(5), 10**9) == 5.0
     assert fragment_size(float("inf"), 10**9) is None and fragment_size(None, 10**9) is None
     option = typing.get_type_hints(LayerArgs, include_extras=True)["fragment_size"]
     help_text = " ".join(option.__metadata__[0].help.split())
     assert f"{AUTO_CUT:,} triangles" in help_text and f"default: {AUTO_FRAGMENT:g} " in help_text
+    assert f"down to {AUTO_FINEST:g}" in help_text
+    assert f"{AUTO_NODE_VERTICES:,} vertices" in help_text
+
+
+@pytest.mark.parametrize("phase", [0.0, 0.5])
+def test_the_densest_node_is_counted_as_by_brute_force(phase):
+    """densest_node against every node's count worked out point by point, for a
+    cut box, a box inside one node (every vertex) and a box of too many nodes to
+    count (0: the side is not halved further)."""
+    from isoconvert.writers.precomputed import octree
+
+    rng = np.random.default_rng(5)
+    points = np.concatenate([rng.uniform(3.3, 200.7, (4000, 3)), rng.normal(60, 4, (3000, 3))])
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    pieces = lambda: np.array_split(points, 3)  # noqa: E731
+    for side in (16.0, 32.0, 64.0):
+        origin = np.floor(lo - phase) + phase  # the cut's planes, by hand
+        cell = np.floor((points - origin) / side).astype(int)
+        _, counts = np.unique(cell, axis=0, return_counts=True)
+        assert octree.densest_node(pieces, lo, hi, side, phase) == counts.max()
+    assert octree.densest_node(pieces, lo, hi, 256.0, phase) == len(points)
+    assert octree.densest_node(pieces, lo, hi, 1.0, phase) == 0  # 198^3 nodes
+
+
+def _node_vertices(vertices, side, phase):
+    """The most of ``vertices`` (index coordinates) one node of ``side`` holds, the
+    nodes starting at ``phase`` past a whole index below them all."""
+    origin = np.floor(vertices.min(axis=0) - phase) + phase
+    _, counts = np.unique(np.floor((vertices - origin) / side), axis=0, return_counts=True)
+    return counts.max()
+
+
+@pytest.mark.parametrize("labels", [False, True])
+def test_by_default_a_dense_surface_is_cut_into_smaller_fragments(tmp_path, monkeypatch, labels):
+    """--fragment-size auto halves 128 while one node would hold more than the rule's
+    vertices: a gyroid (a dense isosurface, and as a label its net's surface, given
+    to the layer in parts) comes out in 64- or 32-voxel fragments as its PLY's
+    vertices, counted node by node here, say (a node of exactly the rule's count
+    is not halved), the bytes of that --fragment-size given, and for the
+    unsmoothed net (planes midway between samples) the PLY's triangles at level 0."""
+    from isoconvert.cli import main
+    from isoconvert.meshfile import read_mesh
+    from isoconvert.writers.precomputed import octree
+
+    monkeypatch.setattr(octree, "AUTO_CUT", 1000)
+    n = 96
+    z, y, x = (a * (2 * np.pi / 24) for a in np.ogrid[:n, :n, :n])
+    gyroid = np.sin(x) * np.cos(y) + np.sin(y) * np.cos(z) + np.sin(z) * np.cos(x)
+    path = tmp_path / "gyroid.npy"
+    if labels:
+        np.save(path, np.ascontiguousarray((gyroid > 0.2).astype(np.uint8).T))
+        given, ply = ["--labels", "--smooth", "0"], tmp_path / "g_label1.ply"
+    else:
+        np.save(path, np.ascontiguousarray(gyroid.T.astype(np.float32)))
+        given, ply = ["--level", "0.2"], tmp_path / "g.ply"
+    base = ["convert", str(path), *given, "-q"]
+    assert main([*base, "-o", str(tmp_path / "g.ply")]) == 0
+    surface = read_mesh(ply)
+    phase = 0.5 if labels else 0.0
+    counts = {side: _node_vertices(surface.vertices, side, phase) for side in (64, 32)}
+    assert len(surface.vertices) > counts[64] > counts[32]
+    layer = [*base, "--format", "precomputed", "--lods", "1", "-o"]
+    for side in (64, 32):
+        assert main([*layer, str(tmp_path / f"said{side}"), "--fragment-size", str(side)]) == 0
+    limits = ((len(surface.vertices) - 1, 64), (counts[64], 64), (counts[64] - 1, 32))
+    for n, (limit, side) in enumerate(limits):
+        monkeypatch.setattr(octree, "AUTO_NODE_VERTICES", int(limit))
+        folder = tmp_path / f"auto{n}"
+        assert main([*layer, str(folder)]) == 0
+        chunk, *_ = _manifest(folder / "mesh" / "1.index")
+        assert np.array_equal(chunk, [side] * 3)
+        assert _layer_bytes(folder) == _layer_bytes(tmp_path / f"said{side}")
+        if labels:  # an isosurface's corners within a step of each other merge
+            assert len(_cloud(folder).mesh.get(1, lod=0)[1].faces) == surface.n_cells
 
 
 def _layer_bytes(folder) -> dict:

@@ -498,8 +498,9 @@ class LayerArgs:
             callback=_fragment_size,
             help="Cut each object of --format precomputed into fragments of this many voxels "
             "a side (octree nodes a viewer loads one by one); default: 128 for objects of more "
-            "than 524,288 triangles, one fragment a level for smaller ones; inf: one fragment "
-            "per object and level of detail.",
+            "than 524,288 triangles (halved, down to 32, while one node holds more than 131,072 "
+            "vertices), one fragment a level for smaller ones; inf: one fragment per object "
+            "and level of detail.",
         ),
     ] = None
     sharded: Annotated[

@@ -323,9 +323,11 @@ class LabelParts:
         self._owner, self._label = owner, label
         self._quads = net.quads[net.offsets[n] : net.offsets[n + 1]]
         self._inside = int(net.inside[n])
-        self._low = self._high = self._y = None
+        self._low = self._high = self._y = self._box = None
 
     def extent(self, to_index: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        if self._box is not None:
+            return self._box
         net = self._owner._net
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
         n = len(self._quads)
@@ -343,11 +345,22 @@ class LabelParts:
         release(net.corners)
         release(net.vertices)
         # what the results say of the surface, without building it
-        used = _count_distinct(corners.reshape(-1))
+        used = len(_distinct(corners.reshape(-1)))
         info = self._owner._info(self._label)
         summary = MeshSummary(used, 2 * len(self._quads), True, info)
         self._owner._summaries.setdefault(self._label, summary)
+        self._box = lo, hi
         return lo, hi
+
+    def vertex_positions(
+        self, to_index: Callable[[np.ndarray], np.ndarray]
+    ) -> Iterator[np.ndarray]:
+        net = self._owner._net
+        used = _distinct(net.corners[self._quads].reshape(-1))  # the surface's vertices
+        release(net.corners)
+        for a in range(0, len(used), 4 * self.PIECE):
+            yield to_index(net.vertices[used[a : a + 4 * self.PIECE]])
+            release(net.vertices)
 
     def reaching(
         self, to_index: Callable[[np.ndarray], np.ndarray], low: np.ndarray, high: np.ndarray
@@ -400,17 +413,18 @@ class LabelParts:
         return self._owner.meshes[self._label]
 
 
-def _count_distinct(ids: np.ndarray) -> int:
-    """How many distinct values ``ids`` holds: a bitmap over their range when it
-    is not much wider than they are many (a large label's vertices), else a sort."""
+def _distinct(ids: np.ndarray) -> np.ndarray:
+    """The distinct values of ``ids`` (int64), increasing: a bitmap over their
+    range when it is not much wider than they are many (a large label's
+    vertices), else a sort."""
     if not len(ids):
-        return 0
+        return np.empty(0, np.int64)
     lo, hi = int(ids.min()), int(ids.max())
     if hi - lo >= 16 * len(ids):
-        return len(np.unique(ids))
+        return np.unique(ids).astype(np.int64)
     mark = np.zeros(hi - lo + 1, bool)
     mark[ids - lo] = True
-    return int(np.count_nonzero(mark))
+    return np.flatnonzero(mark) + lo
 
 
 @dataclass(frozen=True)

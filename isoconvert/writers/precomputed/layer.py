@@ -243,9 +243,9 @@ def write_precomputed(
     chunk : float, "auto" or None
         The octree's finest nodes, in index units (cubes): an object larger is cut
         into fragments a viewer can load one by one. "auto": :data:`AUTO_FRAGMENT`
-        for objects of more than :data:`AUTO_CUT` triangles, one fragment a level
-        for the others (:func:`.octree.fragment_size`). None or infinity: one
-        fragment a level.
+        (halved while a node holds too many vertices) for objects of more than
+        :data:`AUTO_CUT` triangles, one fragment a level for the others
+        (:func:`.octree.fragment_size`). None or infinity: one fragment a level.
     phase : float
         Where the cut planes lie in the voxel grid, in index units past the
         samples (:func:`.octree.object_frame`): 0 (isosurfaces, whose triangles

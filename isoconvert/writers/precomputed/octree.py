@@ -10,7 +10,7 @@ the node holding its centroid, and each node's vertices are quantized in its box
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,17 +28,64 @@ from ...mesh import meeting_each
 #: against 1.9 MB).
 AUTO_CUT = 1 << 19
 AUTO_FRAGMENT = 128.0
+#: ... and the side is halved, down to ``AUTO_FINEST``, while one node holds more
+#: than ``AUTO_NODE_VERTICES`` of the object's vertices (some 260,000 triangles):
+#: a scan's isosurface can put most of itself in one node (the embryo at 60.5:
+#: 361,782 of its 488,850 vertices in one 128-voxel node, 81,408 at most in a
+#: 64-voxel one), and one node's fragment is encoded at once. Vertices, not
+#: triangles, so that an object handed over in parts (a label's net) and whole
+#: count alike; the side is not halved past ``AUTO_MOST_NODES`` nodes in the box.
+AUTO_NODE_VERTICES = 1 << 17
+AUTO_FINEST = 32.0
+AUTO_MOST_NODES = 1 << 21
 
 
-def fragment_size(chunk: float | str | None, triangles: int) -> float | None:
+def fragment_size(
+    chunk: float | str | None,
+    triangles: int,
+    densest: Callable[[float], int] | None = None,
+) -> float | None:
     """The finest nodes' side of an object of ``triangles`` triangles, None for one
     fragment a level: ``chunk`` itself, or for ``"auto"`` the rule of
-    :data:`AUTO_CUT`; None or infinity: one fragment a level."""
+    :data:`AUTO_CUT` and :data:`AUTO_NODE_VERTICES`, ``densest(side)`` giving the
+    most vertices a node of that side holds (:func:`densest_node`; None: none
+    too many); None or infinity: one fragment a level."""
     if isinstance(chunk, str):  # "auto", checked by the layer
-        return AUTO_FRAGMENT if triangles > AUTO_CUT else None
+        if triangles <= AUTO_CUT:
+            return None
+        side = AUTO_FRAGMENT
+        while side > AUTO_FINEST and densest is not None and densest(side) > AUTO_NODE_VERTICES:
+            side /= 2
+        return side
     if chunk is None or np.isinf(chunk):
         return None
     return float(chunk)
+
+
+def densest_node(
+    positions: Callable[[], Iterable[np.ndarray]],
+    lo: np.ndarray,
+    hi: np.ndarray,
+    side: float,
+    phase: float = 0.0,
+) -> int:
+    """The most vertices one node ``side`` voxels wide holds, of an object whose
+    vertices ``positions()`` gives (index coordinates, each vertex once, (n, 3)
+    float64 pieces) in the box ``lo``..``hi``, its nodes as :func:`object_frame`
+    places them (all of them when it is not cut); 0 when the box holds more than
+    :data:`AUTO_MOST_NODES` of them (the count's table: the side is not halved
+    further)."""
+    grid_origin, shape, cut = object_frame(lo, hi, side, phase)
+    if not cut:
+        return sum(len(p) for p in positions())
+    nodes = (np.floor((hi - grid_origin) / shape).astype(np.int64) + 1).clip(1)
+    if int(np.prod(nodes)) > AUTO_MOST_NODES:
+        return 0
+    counts = np.zeros(int(np.prod(nodes)), np.int64)
+    for p in positions():
+        at = np.floor((p - grid_origin) / shape).astype(np.int64).clip(0, nodes - 1)
+        counts += np.bincount(np.ravel_multi_index(at.T, nodes), minlength=len(counts))
+    return int(counts.max())
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ from .fragments import (
 from .octree import (
     Octree,
     cut_level,
+    densest_node,
     fragment_size,
     level_frame,
     node_rows,
@@ -147,7 +148,7 @@ def object_tasks(
             if lods > 1 and len(mesh.cells) > LARGE_OBJECT:  # coarser levels from slabs too
                 pieces = _WholeParts(mesh)
         triangles = pieces.n_cells if pieces is not None else len(mesh.cells)
-        size = fragment_size(chunk, triangles)
+        size = fragment_size(chunk, triangles, _densest(pieces, mesh, to_index, phase))
         large = pieces is not None and lods > 1 and triangles > LARGE_OBJECT
         if pieces is not None and (size is not None or large):
             lo, hi = pieces.extent(to_index)
@@ -202,6 +203,26 @@ def object_tasks(
         yield segment, f"object {segment}", encode_object, args
 
 
+def _densest(
+    pieces: MeshParts | None, mesh: Mesh | None, to_index: Callable, phase: float
+) -> Callable[[float], int]:
+    """For :func:`.octree.fragment_size`: the most vertices a node of a side holds,
+    of an object given in ``pieces`` or whole (the same count either way)."""
+    if pieces is not None:
+        return lambda side: densest_node(
+            lambda: pieces.vertex_positions(to_index), *pieces.extent(to_index), side, phase
+        )
+
+    @functools.cache  # asked only of an object the rule would cut
+    def index() -> np.ndarray:
+        return to_index(np.asarray(mesh.vertices, dtype=np.float64))
+
+    def densest(side: float) -> int:
+        return densest_node(lambda: [index()], index().min(0), index().max(0), side, phase)
+
+    return densest
+
+
 def row_tasks(
     pieces: MeshParts, to_index: Callable, frame: Octree, most: int
 ) -> list[list[tuple[int, int]]]:
@@ -231,6 +252,9 @@ class _WholeParts:
     """An object given whole as :class:`~isoconvert.mesh.MeshParts` (a large
     isosurface, a post-processed label), so that its coarser levels come from
     slabs as a label's do: each triangle's slab by its lowest corner."""
+
+    #: Vertices converted at once.
+    PIECE = 1 << 18
 
     def __init__(self, mesh: Mesh) -> None:
         self._mesh = mesh
@@ -264,6 +288,11 @@ class _WholeParts:
     ) -> np.ndarray:
         self._extents(to_index)
         return meeting_counts((self._low, self._high), self._y, lows, highs)
+
+    def vertex_positions(self, to_index: Callable) -> Iterator[np.ndarray]:
+        vertices = np.asarray(self._mesh.vertices, dtype=np.float64)
+        for start in range(0, len(vertices), self.PIECE):
+            yield to_index(vertices[start : start + self.PIECE])
 
     def slabs(
         self, to_index: Callable, count: int
