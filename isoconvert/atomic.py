@@ -411,8 +411,10 @@ def _remove_tree(folder: Path, tries: int = 5) -> None:
 
 
 def _replace_folder(tmp: Path, path: Path, force: bool) -> None:
-    """Rename the finished folder into place, moving an old one away only then."""
-    if not (path.exists() or path.is_symlink()):
+    """Rename the finished folder into place, moving an old one away only then
+    (an empty folder is renamed over: nothing is in it to keep)."""
+    empty = path.is_dir() and not path.is_symlink() and not any(path.iterdir())
+    if empty or not (path.exists() or path.is_symlink()):
         os.replace(tmp, path)
         _FINISHED.append(path)
         return

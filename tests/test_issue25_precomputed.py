@@ -634,6 +634,38 @@ def test_force_replaces_a_layer_never_a_folder_of_other_files(tmp_path, labelled
         assert (tmp_path / "empty" / "mesh" / "info").is_file()
 
 
+def test_force_keeps_a_users_files_kept_beside_a_layer_and_an_empty_folder_needs_none(
+    tmp_path, labelled
+):
+    """An empty folder (made first, as users do) takes a layer without --force; a
+    layer folder with someone's file beside the layer's own (info, mesh, a scale's
+    chunks) is not replaced, --force or not, and the error names the file; moved
+    out, --force replaces the layer."""
+    from isoconvert.cli import main
+
+    np.save(tmp_path / "labels.npy", _atlas(16, 2))
+    layer = tmp_path / "layer"
+    layer.mkdir()
+    command = ["convert", str(tmp_path / "labels.npy"), "--labels", "--format", "precomputed"]
+    command += ["--with-volume", "-q", "-o", str(layer)]
+    assert main(command) == 0
+    entries = sorted(p.name for p in layer.iterdir())
+    assert "info" in entries and "mesh" in entries and len(entries) == 3  # and the voxels
+    before = _layer_bytes(layer)
+    (layer / "notes.txt").write_text("mine")
+    for force in ([], ["--force"]):
+        run = subprocess.run(
+            [sys.executable, "-m", "isoconvert", *command, *force],
+            capture_output=True, text=True,
+        )  # fmt: skip
+        assert run.returncode == 1 and len(run.stderr.strip().splitlines()) == 1, run.stderr
+        assert "notes.txt" in run.stderr and "move them out" in run.stderr
+        assert (layer / "notes.txt").read_text() == "mine"
+        assert {k: v for k, v in _layer_bytes(layer).items() if k != "notes.txt"} == before
+    (layer / "notes.txt").rename(tmp_path / "notes.txt")
+    assert main([*command, "--force"]) == 0 and _layer_bytes(layer) == before
+
+
 def test_the_part_folder_of_a_killed_run_is_removed(tmp_path, labelled):
     from isoconvert.atomic import _owner_tag
 

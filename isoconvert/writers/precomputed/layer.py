@@ -116,7 +116,7 @@ def check_layer(
                     "write the layer elsewhere"
                 )
     _check_replaceable(folder)
-    if folder.exists() and not force:
+    if folder_taken(folder) and not force:
         raise OutputError(f"{folder} exists; pass --force to replace it")
 
 
@@ -131,15 +131,42 @@ def is_layer(folder: str | Path) -> bool:
 
 
 def _check_replaceable(folder: Path) -> None:
-    """Refuse to replace a folder that is not a precomputed layer: ``--force``
-    replaces a layer (or an empty folder), never a folder of someone's files."""
-    if not folder.is_dir() or not any(folder.iterdir()):
+    """Refuse to replace a folder that is not a precomputed layer, or a layer
+    holding more than a layer's files: ``--force`` replaces a layer (an empty
+    folder is written into without it), never someone's files kept beside one."""
+    if not folder_taken(folder):
         return
     if not is_layer(folder):
         raise OutputError(
             f"{folder} is a folder that is not a Neuroglancer layer (no layer info file); "
             "--force replaces only layers: give the layer a new folder name"
         )
+    foreign = sorted(p.name for p in folder.iterdir() if p.name not in _layer_entries(folder))
+    if foreign:
+        shown = ", ".join(foreign[:3]) + (
+            f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
+        )
+        raise OutputError(
+            f"{folder} holds {shown} beside its layer, which replacing the layer would "
+            "delete: move them out of the folder, or give the layer a new folder name"
+        )
+
+
+def folder_taken(folder: Path) -> bool:
+    """Whether ``folder`` is there and not an empty folder (which a layer is
+    written into as if it were not there)."""
+    if folder.is_symlink() or not folder.is_dir():
+        return folder.exists() or folder.is_symlink()
+    return any(folder.iterdir())
+
+
+def _layer_entries(folder: Path) -> set[str]:
+    """The names a layer's folder holds as a layer: its info and provenance, its
+    mesh folder and its scales' chunk folders, as its info names them."""
+    info = json.loads((folder / "info").read_text(encoding="utf-8"))
+    names = {"info", "provenance", str(info.get("mesh", "mesh"))}
+    names |= {str(scale.get("key")) for scale in info.get("scales", []) if isinstance(scale, dict)}
+    return names
 
 
 def _check_chunk(chunk) -> None:
@@ -324,7 +351,7 @@ def write_precomputed(
             )
     folder = Path(folder)
     _check_replaceable(folder)  # first, as check_layer does
-    if folder.exists() and not force:
+    if folder_taken(folder) and not force:
         raise OutputError(f"{folder} exists; pass --force to replace it")
     transform, nm = layer_transform(clean, unit, voxel_frame=volume is not None)
     if meters_per_unit(unit) is None and on_status:
