@@ -932,13 +932,15 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
     except Exception as exc:  # a bug: report it for this file, keep the others going
         return failed(f"{job.name}: internal error {type(exc).__name__}: {exc}")
     labels = settings.options.labels is not None
+    counts = [r.stored_counts() for r in results]
     outcome = Outcome(
         job.name,
         job.output,
         "ok",
         level=None if labels else float(results[0].summary.info["level"]),
-        vertices=sum(r.summary.n_vertices for r in results),
-        cells=sum(r.summary.n_cells for r in results),
+        # as stored: a layer's cut level can hold fewer triangles than the mesh
+        vertices=sum(stored[0] for stored in counts),
+        cells=sum(stored[1] for stored in counts),
         message=_made(len(results), labels, job.layer) if labels or job.layer else "",
     )
     notes = [outcome.message] if outcome.message else []
@@ -963,6 +965,7 @@ def run_one(job: Job, settings: BatchSettings) -> Outcome:
             # a thumbnail that cannot be made costs the picture, not the mesh
             why = batch_thumbnail(mesh, result.written, str(result.output), grid, report)
             notes += [why] if why else []
+        result.forget_written()  # a layer's objects held one at a time
     if require:
         outcome.checks = checks
     outcome.message = "; ".join(notes)

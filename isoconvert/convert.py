@@ -197,6 +197,8 @@ class ConvertResult:
         Whether the file is text.
     extracted : Mesh or None
         The mesh as extracted, before post-processing (None when no step ran).
+    layer : (Path, int) or None
+        The layer folder and segment id, when ``output`` is an object of a layer.
     """
 
     def __init__(
@@ -208,6 +210,7 @@ class ConvertResult:
         ascii: bool = False,
         extracted: Mesh | None = None,
         summary: MeshSummary | None = None,
+        layer: tuple[Path, int] | None = None,
     ) -> None:
         if summary is None:
             if not isinstance(mesh, Mesh):
@@ -215,6 +218,7 @@ class ConvertResult:
             summary = MeshSummary.of(mesh)
         self.volume, self._mesh, self.summary = volume, mesh, summary
         self.output, self.format, self.ascii, self.extracted = output, format, ascii, extracted
+        self.layer = layer
 
     @property
     def mesh(self) -> Mesh:
@@ -226,8 +230,36 @@ class ConvertResult:
         """The mesh as the file holds it (vertices at the file's precision, STL
         with three vertices per triangle): what ``convert --report`` checks,
         against the volume's grid, so that it agrees with ``isoconvert check
-        FILE`` (``check FILE --grid VOLUME`` for STL, which records no grid)."""
+        FILE`` (``check FILE --grid VOLUME`` for STL, which records no grid). A
+        layer's object: its level 0 read back from the layer
+        (:func:`.writers.precomputed.readback.stored_level`), which a cut can have
+        left with fewer triangles than the mesh."""
+        if self.layer is not None:
+            from .writers.precomputed.readback import stored_level
+
+            stored = stored_level(*self.layer)
+            if stored is not None:
+                index, cells = stored
+                grid = self.summary.info["grid"]
+                world = np.asarray(grid["origin"]) + index @ np.asarray(grid["affine"]).T
+                return stored_mesh(Mesh(world, cells, None, dict(self.summary.info)), self.format)
         return stored_mesh(self.mesh, self.format, self.ascii)
+
+    def stored_counts(self) -> tuple[int, int]:
+        """How many vertices and cells the output holds: a layer object's level 0
+        as stored (a fragment decoded at a time), else the mesh's."""
+        if self.layer is not None:
+            from .writers.precomputed.readback import stored_counts
+
+            counts = stored_counts(*self.layer)
+            if counts is not None:
+                return counts
+        return self.summary.n_vertices, self.summary.n_cells
+
+    def forget_written(self) -> None:
+        """Let :attr:`written` go (built again if asked for): a run over a layer's
+        many objects holds one object's at a time."""
+        self.__dict__.pop("written", None)
 
     def __repr__(self) -> str:
         s = self.summary
@@ -419,7 +451,10 @@ def _convert_levels_to_layer(
                                                    legacy=opts.legacy_mesh)  # fmt: skip
 
     return [
-        ConvertResult(volume, meshes[n], where(n), writer.name, False, extracted[n]) for n in meshes
+        ConvertResult(
+            volume, meshes[n], where(n), writer.name, False, extracted[n], layer=(Path(output), n)
+        )  # fmt: skip
+        for n in meshes
     ]
 
 

@@ -216,7 +216,13 @@ def convert_labels(
     if meshes is not None:  # post-processed: each result holds its label's mesh, both ways
         return [
             ConvertResult(
-                volume, mesh, path, writer.name, opts.ascii and not writer.layer, surfaces[label]
+                volume,
+                mesh,
+                path,
+                writer.name,
+                opts.ascii and not writer.layer,
+                surfaces[label],
+                layer=(Path(output), label) if writer.layer else None,
             )  # fmt: skip
             for label, mesh, path in zip(made, meshes, outputs, strict=True)
         ]
@@ -230,6 +236,7 @@ def convert_labels(
             writer.name,
             opts.ascii and not writer.layer,
             summary=surfaces.summary(label),
+            layer=(Path(output), label) if writer.layer else None,
         )  # fmt: skip
         for label, path in zip(made, outputs, strict=True)
     ]

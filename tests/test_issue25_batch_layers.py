@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+import trimesh
 from cloudvolume import CloudVolume
 
 from isoconvert.cli import main
@@ -94,3 +95,25 @@ def test_batch_layer_mistakes_are_one_line_before_any_work(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0], err
     assert not out.exists()
+
+
+def test_a_batch_row_counts_the_level_0_a_layer_stores(tmp_path):
+    """A cut level 0 can hold fewer triangles than the mesh (corners within a
+    quantization step merge: a float gyroid in 64-voxel nodes): the batch's row
+    counts what cloud-volume reads back, as convert's "wrote" line does."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    n = 96
+    z, y, x = (a * (2 * np.pi / 24) for a in np.ogrid[:n, :n, :n])
+    gyroid = np.sin(x) * np.cos(y) + np.sin(y) * np.cos(z) + np.sin(z) * np.cos(x)
+    np.save(folder / "g.npy", np.ascontiguousarray(gyroid.T.astype(np.float32)))
+    summary = tmp_path / "summary.json"
+    args = ["--level", "0.2", "--format", "precomputed", "--lods", "1", "--fragment-size", "64"]
+    out = tmp_path / "out"
+    assert main(["batch", str(folder), "-o", str(out), "-q", *args, "--summary", str(summary)]) == 0
+    assert main(["batch", str(folder), "-o", str(tmp_path / "ply"), "-q", "--level", "0.2"]) == 0
+    rows = json.loads(summary.read_text())
+    (row,) = rows["files"] if isinstance(rows, dict) else rows
+    back = CloudVolume(f"precomputed://file://{out / 'g'}").mesh.get(1, lod=0)[1]
+    extracted = trimesh.load(tmp_path / "ply" / "g.ply", process=False)
+    assert row["cells"] == len(back.faces) < len(extracted.faces), row

@@ -779,6 +779,34 @@ def test_the_densest_node_is_counted_as_by_brute_force(phase):
     assert octree.densest_node(pieces, lo, hi, 1.0, phase) == 0  # 198^3 nodes
 
 
+@pytest.mark.parametrize("sharded", [False, True])
+def test_the_wrote_line_and_the_report_of_a_layer_are_of_the_level_0_it_stores(tmp_path, sharded):
+    """A cut level 0 can hold fewer triangles than the mesh (corners within a
+    quantization step of each other merge: a float gyroid in 64-voxel nodes): the
+    "wrote" line and --report count what cloud-volume reads back, its vertices
+    joined by position, not the mesh as extracted."""
+    n = 96
+    z, y, x = (a * (2 * np.pi / 24) for a in np.ogrid[:n, :n, :n])
+    gyroid = np.sin(x) * np.cos(y) + np.sin(y) * np.cos(z) + np.sin(z) * np.cos(x)
+    path = tmp_path / "gyroid.npy"
+    np.save(path, np.ascontiguousarray(gyroid.T.astype(np.float32)))
+    base = [sys.executable, "-m", "isoconvert", "convert", str(path), "--level", "0.2"]
+    subprocess.run([*base, "-q", "-o", str(tmp_path / "g.ply")], check=True)
+    extracted = trimesh.load(tmp_path / "g.ply", process=False)
+    layer = [*base, "--format", "precomputed", "--lods", "1", "--fragment-size", "64"]
+    layer += ["-o", str(tmp_path / "layer"), "--report", str(tmp_path / "r.json")]
+    run = subprocess.run(layer + ["--sharded"] * sharded, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    back = _cloud(tmp_path / "layer").mesh.get(1, lod=0)[1]
+    triangles = len(back.faces)
+    # the fragments joined where their vertices are one quantization step apart
+    vertices = len(np.unique(np.rint(back.vertices / (64 / 65535)), axis=0))
+    assert triangles < len(extracted.faces)  # the merges this is about
+    assert f": {vertices:,} vertices, {triangles:,} triangles" in run.stdout, run.stdout
+    counts = json.loads((tmp_path / "r.json").read_text())["counts"]
+    assert (counts["vertices"], counts["triangles"]) == (vertices, triangles)
+
+
 def _node_vertices(vertices, side, phase):
     """The most of ``vertices`` (index coordinates) one node of ``side`` holds, the
     nodes starting at ``phase`` past a whole index below them all."""

@@ -142,6 +142,7 @@ def convert(
     for n, result in enumerate(results):
         if not quiet:
             made = result.summary
+            counts = result.stored_counts()  # a cut layer's level can hold fewer
             kind = "triangles" if made.is_triangles else "segments"
             kind = f"{kind}, {made.info['method']}"
             slabs = made.info.get("blocks", 1)
@@ -155,8 +156,10 @@ def convert(
                 what = f"label {what:g}" if by_label else f"level {what:g}"
             # the run's time once: on each of many lines it read as each file's
             took = f", {time.perf_counter() - start:.2f} s" if len(results) == 1 else ""
+            if result.layer is not None:
+                what = f"level 0 as stored, {what}"
             print(
-                f"wrote {result.output}: {made.n_vertices:,} vertices, {made.n_cells:,} {kind} "
+                f"wrote {result.output}: {counts[0]:,} vertices, {counts[1]:,} {kind} "
                 f"({what}{done}{took})"
             )
         if report is not None or required:
@@ -164,6 +167,7 @@ def convert(
             failed += _report_result(result, target, required, examples, force, quiet)
         if preview is not None:
             _write_preview(result, preview, output, len(results), force, quiet)
+        result.forget_written()
     if not quiet and len(results) > 1:
         from ..writers import WRITERS
 
