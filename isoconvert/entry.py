@@ -46,7 +46,11 @@ def run() -> None:
     # installs it only over Python's defaults)
     for sig, handler in before.items():
         signal.signal(sig, handler)
-    sys.exit(main())
+    code = main()
+    from .signals import quiet_exit
+
+    quiet_exit()
+    sys.exit(code)
 
 
 if __name__ == "__main__":

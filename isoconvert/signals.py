@@ -326,7 +326,19 @@ __all__ = [
     "run_in_worker",
     "signal_name",
     "start_resource_tracker",
+    "quiet_exit",
     "stop_workers",
     "stop_workers_on_interrupt",
     "worker_init",
 ]
+
+
+def quiet_exit() -> None:
+    """Ignore the signals that stop a run once it has ended, its outputs in place
+    or removed: one arriving while the interpreter shuts down would interrupt an
+    exit callback (nanobind's, for the kernels) and print a traceback from it,
+    and the exit code is already the run's."""
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        if sig is not None:
+            signal.signal(sig, signal.SIG_IGN)

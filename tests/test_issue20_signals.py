@@ -630,3 +630,23 @@ def test_a_full_disk_names_small_amounts_in_kib_or_bytes(tmp_path, monkeypatch, 
         str(error)
         == f"disk full at {tmp_path / 'm.ply'} {told}; free space there or write elsewhere"
     )
+
+
+def test_a_signal_while_the_interpreter_shuts_down_after_a_run_prints_no_traceback(tmp_path):
+    """A Ctrl-C that comes once the run has ended (its outputs in place), while the
+    exit callbacks run (nanobind registers one for the kernels), is ignored: no
+    "Exception ignored in atexit callback" traceback, and the run's exit code."""
+    script = tmp_path / "late.py"
+    script.write_text(
+        "import atexit, os, signal, sys, time\n"
+        "import isoconvert.cli\n"
+        "from isoconvert import entry\n"
+        "def late():\n"
+        "    os.kill(os.getpid(), signal.SIGINT)\n"
+        "    time.sleep(0.3)\n"
+        "isoconvert.cli.main = lambda: atexit.register(late) and 0\n"
+        "sys.argv = ['isoconvert']\n"
+        "entry.run()\n"
+    )
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True)
+    assert (run.returncode, run.stderr) == (0, "")

@@ -2,8 +2,11 @@
 
 import sys
 
+from ..signals import quiet_exit
 from ..threads import prepare_process
 from . import main
 
 prepare_process()
-sys.exit(main())
+code = main()
+quiet_exit()
+sys.exit(code)
