@@ -418,6 +418,27 @@ def test_check_prints_a_table_and_rejects_unknown_names(tmp_path, capsys):
     assert "not a readable PLY" in capsys.readouterr().err
 
 
+def test_a_report_name_convert_does_not_take_is_said_in_the_error(tmp_path, capsys):
+    """convert's --report takes a file named *.json or *.txt (bare, it prints): a
+    name of another kind, wherever it stands, is one usage line (exit 2) that says
+    so and names it, not only "an argument too many", and nothing is written."""
+    sphere = str(SAMPLES / "sphere.nrrd")
+    out = tmp_path / "s.ply"
+    for argv in (
+        ["convert", sphere, "-l", "127.5", "-o", str(out), "--report", "r.md"],
+        ["convert", "--report", "r.xyz", sphere, "-l", "127.5", "-o", str(out)],
+    ):
+        capsys.readouterr()
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        named = argv[argv.index("--report") + 1]
+        assert len(err.splitlines()) == 1 and "*.json or *.txt" in err and named in err, err
+        assert not out.exists()
+    # an argument too many for another reason gets no word about reports
+    assert main(["convert", sphere, "extra", "-l", "127.5", "-o", str(out)]) == 2
+    assert "--report" not in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(("name", "level", "unit"), [
     ("ct_chest_LIDC-IDRI-0314_dicom", "1300.5", "mm"),
     ("XYZ_organ-of-corti_confocal.tif", "2500.5", "µm"),

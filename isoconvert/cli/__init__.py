@@ -31,6 +31,7 @@ import importlib
 import os
 import sys
 from contextlib import redirect_stdout
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -294,7 +295,9 @@ def _run_command(argv: list[str] | None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     display._show_third_party = debug  # numpy warnings and tifffile's log lines are not for users
-    args = gather_multi_values([a for a in args if a != "--debug"])
+    args = [a for a in args if a != "--debug"]
+    unnamed = _report_names_not_taken(args)
+    args = gather_multi_values(args)
     for stream in (sys.stdout, sys.stderr):
         # a file name that is not UTF-8 (Python holds its bytes as surrogates)
         # prints with a replacement character instead of failing the run
@@ -346,6 +349,11 @@ def _run_command(argv: list[str] | None) -> int:
             # one line, as for every other mistake (click draws a box of several)
             ctx = getattr(exc, "ctx", None)
             command = ctx.command_path if ctx is not None else "isoconvert"
+            if unnamed and "unexpected extra argument" in message:
+                message += (
+                    f"; --report takes a file named *.json or *.txt (bare, it prints the "
+                    f"report), so {unnamed[0]} was read as another argument"
+                )
             print(
                 f"isoconvert: error: {one_line(message, limit=500)} (see {command} --help)",
                 file=sys.stderr,
@@ -363,6 +371,23 @@ def _run_command(argv: list[str] | None) -> int:
         )
         return 3
     return 0
+
+
+def _report_names_not_taken(argv: list[str]) -> list[str]:
+    """The words after convert's ``--report`` that look like a file name but not a
+    report's (:data:`REPORT_SUFFIXES`): :func:`gather_multi_values` leaves them to
+    the command, which may then find an argument too many."""
+    command = next((a for a in argv if not a.startswith("-")), None)
+    if command != "convert":
+        return []
+    return [
+        word
+        for token, word in zip(argv, argv[1:], strict=False)
+        if token == "--report"
+        and not word.startswith("-")
+        and Path(word).suffix
+        and not word.lower().endswith(REPORT_SUFFIXES)
+    ]
 
 
 def _is_usage_error(exc: Exception) -> bool:
