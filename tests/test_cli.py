@@ -183,10 +183,15 @@ def test_unknown_dtype(tmp_path, capsys):
     assert_no_output(tmp_path)
 
 
-@pytest.mark.parametrize("level", ["300", "0", "-5"])
-def test_level_outside_the_range_gives_the_range(tmp_path, capsys, level):
+@pytest.mark.parametrize(
+    "level, where", [("300", "outside the data range"), ("0", "at the data's minimum"),
+                     ("-5", "outside the data range")],
+)  # fmt: skip
+def test_level_outside_the_range_gives_the_range(tmp_path, capsys, level, where):
+    """0 is the sphere's minimum: inside its range, but every sample is positive
+    there (>= level), so the line says so rather than "outside"."""
     code, _, err = run(capsys, "convert", SPHERE, "-l", level, "-o", tmp_path / "o.ply")
-    assert_one_line_error(code, err, "outside the data range", "0 < level <= 233")
+    assert_one_line_error(code, err, where, "0 < level <= 233")
     assert_no_output(tmp_path)
 
 

@@ -181,9 +181,12 @@ def check_level(level: float, stats: ValueRange, src: str) -> float:
             f"{src}: the volume is constant (every sample is {stats.min:g}); it has no isosurface"
         )
     if not stats.min < level <= stats.max:
+        # at the minimum every sample is >= level (positive): nothing lies below it
+        where = "at the data's minimum" if level == stats.min else "outside the data range"
         raise LevelError(
-            f"{src}: level {level:g} is outside the data range; choose a level with "
-            f"{stats.min:g} < level <= {stats.max:g} (`isoconvert info` suggests some)"
+            f"{src}: level {level:g} is {where}, so no surface separates samples; choose "
+            f"a level with {stats.min:g} < level <= {stats.max:g} (`isoconvert info` "
+            "suggests some)"
         )
     return level
 
