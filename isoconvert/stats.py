@@ -227,7 +227,7 @@ def no_levels_reason(hist: Histogram) -> str | None:
         return (
             f"no finite samples (all {hist.nonfinite:,} are NaN or infinite), so no value "
             "range and no level; --nan-as VALUE would make every sample that one value "
-            "(is --dtype or --endian wrong?)"
+            "(a raw file: are --dtype and --endian right?)"
         )
     if hist.low < hist.high:
         return None
