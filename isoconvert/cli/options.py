@@ -450,8 +450,9 @@ class LabelArgs:
         bool,
         _flag(
             "--labels",
-            help="A label volume: one closed surface per label (Surface Nets), "
-            "NAME_labelL.ply; --smooth N sets its relaxation iterations (default 16).",
+            help="A label volume: one surface per label enclosing its voxels (Surface Nets; "
+            "a note counts the places it cannot be manifold), NAME_labelL.ply; --smooth N "
+            "sets its relaxation iterations (default 16).",
         ),
     ] = False
     label: Annotated[
