@@ -27,9 +27,10 @@ from .atomic import (
 from .errors import FormatError, IsoconvertError, OutputError
 from .extract.slabs import Blocks
 from .mesh import Mesh, MeshSummary
+from .meshfile import READ_SUFFIXES
 from .methods import DEFAULT_AMBIGUITY
 from .post.pipeline import PostOptions, post_process
-from .readers import ReadOptions, read_volume
+from .readers import READERS, ReadOptions, format_suffix, read_volume
 from .volume import Volume
 from .writers import WRITERS, Writer, check_attributes, output_format
 from .writers.stored import stored_mesh, write_mesh
@@ -579,8 +580,21 @@ def refuse_outputs_read(outputs: Sequence[str | Path], *volumes: Volume | None) 
         refuse_inputs(path, files)
 
 
+def refuse_mesh_input(input: str | Path, input_format: str | None) -> None:
+    """A mesh file given where a volume goes is said to be one (a file whose suffix
+    only a mesh format claims, no --input-format), not a name with no format."""
+    suffix = format_suffix(input)
+    if input_format is None and READERS.by_suffix(suffix) is None and suffix in READ_SUFFIXES:
+        if not Path(input).is_dir():
+            raise FormatError(
+                f"{input}: a mesh file ({suffix}), not a volume: convert and batch read "
+                "volumes; `isoconvert check` and `isoconvert preview` read meshes"
+            )
+
+
 def read_input(input: str | Path, opts: ConvertOptions) -> Volume:
     """The input volume, in the frame ``opts.space`` asks for."""
+    refuse_mesh_input(input, opts.input_format)
     volume = read_volume(
         input,
         format=opts.input_format,

@@ -35,3 +35,25 @@ def test_an_output_folder_that_refuses_files_fails_before_the_work(tmp_path, cap
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 1 and len(err) == 1 and "cannot create files in the folder /proc" in err[0]
     assert not mesh.exists()
+
+
+@pytest.mark.parametrize("name", ["tête.obj", "s.stl", "s.glb"])
+def test_a_mesh_given_for_a_volume_is_said_to_be_a_mesh(tmp_path, capsys, name):
+    """A mesh file where convert wants a volume (one isoconvert wrote: its suffix
+    no volume reader claims) is one line naming it a mesh and what reads meshes,
+    not "cannot tell the format"; its format given with --input-format is read as
+    that format, which then refuses it in its own words."""
+    mesh = tmp_path / name
+    assert (
+        main(["convert", str(SAMPLES / "sphere.nrrd"), "-l", "127.5", "-o", str(mesh), "-q"]) == 0
+    )
+    capsys.readouterr()
+    code = main(["convert", str(mesh), "-l", "1", "-o", str(tmp_path / "x.ply")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and len(err) == 1 and "a mesh file" in err[0] and "isoconvert check" in err[0]
+    assert not (tmp_path / "x.ply").exists()
+    code = main(
+        ["convert", str(mesh), "--input-format", "raw", "-l", "1", "-o", str(tmp_path / "x.ply")]
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0 and len(err) == 1 and "a mesh file" not in err[0]
