@@ -10,6 +10,9 @@ from __future__ import annotations
 import functools
 import re
 
+#: The fix a file parser's error points to, for a file of the right kind.
+DAMAGED_FILE = "it may be damaged or cut short: compare its size with the original's"
+
 
 class IsoconvertError(Exception):
     """Base class of every error caused by input the user can fix."""

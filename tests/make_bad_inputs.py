@@ -25,6 +25,16 @@ class Case:
     says: tuple[str, ...] = ()
 
 
+def _nifti_bytes() -> bytes | None:
+    """A small NIfTI-1 image (16^3 int16), or None without nibabel."""
+    try:
+        import nibabel
+    except ImportError:
+        return None
+    data = np.arange(16**3, dtype=np.int16).reshape(16, 16, 16)
+    return nibabel.Nifti1Image(data, np.eye(4)).to_bytes()
+
+
 def _nrrd_header(sizes="4 4 3", type_="short", encoding="raw", extra="") -> bytes:
     return (
         f"NRRD0004\ndimension: {len(sizes.split())}\ntype: {type_}\nsizes: {sizes}\n"
@@ -139,6 +149,10 @@ def make_bad_inputs(folder: Path) -> dict[str, Case]:
     # issue 11: NIfTI is read (through nibabel); a header of zeros is not NIfTI
     put("scan.nii.gz", gzip.compress(bytes(352)), says=("not a readable NIfTI file",))
     put("scan.nii", bytes(352), says=("not a readable NIfTI file",))
+    # a real NIfTI cut short (a copy stopped midway): the fix is a fresh copy
+    nifti = _nifti_bytes()
+    if nifti is not None:
+        put("cut.nii.gz", gzip.compress(nifti)[:400], says=("not a readable", "cut short"))
     # issue 11: MetaImage is read; a header without its ElementDataFile line is refused
     put("head.mhd", b"ObjectType = Image\nNDims = 3\n", says=("no ElementDataFile line",))
     put("head.mha", b"ObjectType = Image\nNDims = 3\n", says=("no ElementDataFile line",))

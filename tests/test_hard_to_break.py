@@ -59,6 +59,7 @@ CASE_NAMES = [
     "gzip_short.nrrd",
     "scan.nii.gz",
     "scan.nii",
+    "cut.nii.gz",
     "head.mhd",
     "head.mha",
     "slice.dcm",

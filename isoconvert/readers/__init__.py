@@ -8,7 +8,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..errors import FormatError, InputNotFoundError, IsoconvertError, VolumeError, one_line
+from ..errors import (
+    DAMAGED_FILE,
+    FormatError,
+    InputNotFoundError,
+    IsoconvertError,
+    VolumeError,
+    one_line,
+)
 from ..lazy import LazyFunction
 from ..registry import Registry
 from .options import ReadOptions, without_overridden
@@ -386,7 +393,8 @@ def read_volume(
         # The parsers (pynrrd, tifffile, Pillow) raise many kinds of exceptions on
         # corrupt input; each is a fact about the file, not a bug of ours.
         raise FormatError(
-            f"{spec}: not a readable {name} file ({type(exc).__name__}: {one_line(exc)})"
+            f"{spec}: not a readable {name} file ({type(exc).__name__}: {one_line(exc)}); "
+            f"{DAMAGED_FILE}"
         ) from None
     if volume.dtype.kind not in "biuf":
         raise VolumeError(

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError, VolumeError, extra_hint, one_line
+from ..errors import DAMAGED_FILE, FormatError, VolumeError, extra_hint, one_line
 from ..grid import RawGrid
 from ..memory import check_fits
 from ..volume import Volume
@@ -52,7 +52,8 @@ def _load(path: Path):
         img = nib.load(str(path))
     except Exception as exc:  # nibabel raises many kinds on a corrupt header
         raise FormatError(
-            f"{path}: not a readable NIfTI file ({type(exc).__name__}: {one_line(exc)})"
+            f"{path}: not a readable NIfTI file ({type(exc).__name__}: {one_line(exc)}); "
+            f"{DAMAGED_FILE}"
         ) from None
     if not isinstance(img, nib.Nifti1Image):  # Nifti2Image is a subclass
         raise FormatError(
