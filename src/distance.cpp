@@ -241,11 +241,17 @@ Grid build_grid(const std::vector<float> &box, i64 n_tri, double radius) {
 }
 
 // A grid over one mesh, built once and queried many times (decimation asks
-// for distances to its input after every collapse).
+// for distances to its input after every collapse). It reads the mesh's
+// arrays where they are, holding them (a copy was a quarter of a large
+// mesh's grid, and decimation holds two).
 class TriangleGrid {
  public:
-  TriangleGrid(std::vector<double> v, std::vector<Index> t, double radius)
-      : v_(std::move(v)), t_(std::move(t)), n_tri_(i64(t_.size() / 3)) {
+  TriangleGrid(Doubles vertices, Int64s triangles, double radius)
+      : vertices_(std::move(vertices)),
+        triangles_(std::move(triangles)),
+        v_(vertices_.data()),
+        t_(triangles_.data()),
+        n_tri_(i64(triangles_.shape(0))) {
     box_.resize(6 * n_tri_);
     for (i64 f = 0; f < n_tri_; ++f) {
       for (int k = 0; k < 3; ++k) {
@@ -411,12 +417,14 @@ class TriangleGrid {
 
  private:
   Vec corner(i64 f, int q) const {
-    const double *c = v_.data() + 3 * t_[3 * f + q];
+    const double *c = v_ + 3 * t_[3 * f + q];
     return Vec{c[0], c[1], c[2]};
   }
 
-  std::vector<double> v_;
-  std::vector<Index> t_;
+  Doubles vertices_;  // held: the Python arrays stay alive while the grid reads them
+  Int64s triangles_;
+  const double *v_;
+  const i64 *t_;
   i64 n_tri_;
   Grid g_;
   std::vector<float> box_;  // per triangle: lower x, y, z, upper x, y, z (outwards)
@@ -453,10 +461,8 @@ void bind_distance(nb::module_ &m) {
                 throw std::invalid_argument("TriangleGrid: vertices must be finite, within 1e37");
               }
             }
-            std::vector<double> v(vertices.data(), vertices.data() + 3 * n_vertices);
-            std::vector<Index> t(triangles.data(), triangles.data() + 3 * n_tri);
             nb::gil_scoped_release unlocked;
-            new (self) TriangleGrid(std::move(v), std::move(t), radius);
+            new (self) TriangleGrid(std::move(vertices), std::move(triangles), radius);
           },
           "vertices"_a, "triangles"_a, "radius"_a)
       .def(

@@ -14,7 +14,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from isoconvert.post.decimate import TriangleGrid, _InputRows, _rows_in
+from isoconvert.post.decimate import TriangleGrid, _InputRows, _rows_among, _rows_in
 
 # --- the certificate, as distance.cpp computes it, one operation at a time ------------
 
@@ -252,5 +252,28 @@ def test_input_rows_find_what_sorting_both_sides_finds(seed, n_vertices, n_input
         rolled = np.roll(picked, rng.integers(0, 3), axis=1)[:, :: rng.choice([1, -1])]
         out = np.where(rng.random((n_out, 1)) < 0.5, rolled, out)
     kept, still = _InputRows(cells).shared(out)
-    assert kept.tolist() == _rows_in(out, cells).tolist()
-    assert still.tolist() == _rows_in(cells, out).tolist()
+    assert kept.tolist() == _rows_in(out, cells).tolist() == _rows_among(out, cells).tolist()
+    assert still.tolist() == _rows_in(cells, out).tolist() == _rows_among(cells, out).tolist()
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n_input=st.integers(0, 40), n_out=st.integers(0, 40))
+def test_input_rows_settle_rows_that_share_a_hash_exactly(seed, n_input, n_out):
+    """Different rows that share a hash (forced here: a hash of 3 values) are told
+    apart, as repeated rows are: :meth:`_InputRows.shared` both ways still equals
+    :func:`_rows_in` both ways."""
+    from unittest import mock
+
+    import isoconvert.post.decimate as decimate
+
+    rng = np.random.default_rng(seed)
+    cells = rng.integers(0, 9, (n_input, 3))
+    out = rng.integers(0, 9, (n_out, 3))
+    if n_input and n_out:
+        out[: n_out // 2] = cells[rng.integers(0, n_input, n_out // 2)][:, ::-1]
+    weak = lambda rows: (np.asarray(rows).sum(axis=1) % 3).astype(np.uint64)  # noqa: E731
+    with mock.patch.object(decimate, "row_hashes", weak):
+        kept, still = _InputRows(cells).shared(out)
+        among = _rows_among(out, cells), _rows_among(cells, out)
+    assert kept.tolist() == _rows_in(out, cells).tolist() == among[0].tolist()
+    assert still.tolist() == _rows_in(cells, out).tolist() == among[1].tolist()

@@ -219,7 +219,6 @@ def collapse(
     limit = _FIRST_LIMIT * radius if max_error is not None else float(np.finfo(np.float32).max)
     guard = _TopologyGuard(vertices, cells)
     input_rows = _InputRows(cells)
-    input_grid = TriangleGrid(vertices, cells, radius) if max_error is not None else None
     certified = Certified()  # the result's triangles certified onto the input so far
     # what is wrong with the input stays as it is: collapses never touch it
     fixed = None if locked is None else np.asarray(locked, dtype=bool)
@@ -234,6 +233,9 @@ def collapse(
     while attempts < _MAX_ATTEMPTS and n_cells:
         stop_if_interrupted()  # on a worker thread of an interrupted run
         attempts += 1
+        # the last attempt's distance grid is not held beside this one's (with the
+        # input's, three grids of a large mesh were the peak of its collapse)
+        output_grid = distance = nearest = None
         out, library_error = simplify(indices, positions, locked, target, limit, options)
         out, flat = _flipped_flats(vertices, out, guard.input_problems, fixed)
         new_problems = guard.new_problems(out, flat)
@@ -275,9 +277,14 @@ def collapse(
             continue
         # and every point of the result within the bound of the input (triangles
         # certified in an earlier collapse stay so: the input does not change)
+        # (the input's distance grid is built for this check alone: one grid of
+        # the mesh's size at a time, at some 0.1 s a build on 500k triangles)
+        output_grid = None
+        input_grid = TriangleGrid(vertices, cells, radius)
         surface, failed = within_bound(
             vertices, out, input_grid, cells, bound, known=certified, shared=kept
         )
+        del input_grid
         if not failed.any():
             break
         # lock the input the failing triangles replaced (the input vertices nearest
@@ -640,9 +647,9 @@ def within_bound(
         The triangles not certified within ``bound``.
     """
     failed = np.zeros(len(triangles), dtype=bool)
-    skip = _rows_in(triangles, onto) if shared is None else shared.copy()
+    skip = _rows_among(triangles, onto) if shared is None else shared.copy()
     if known is not None and len(known.rows):
-        skip |= _rows_in(triangles, known.rows)
+        skip |= _rows_among(triangles, known.rows)
     fresh = np.flatnonzero(~skip)
     before = known.reach if known is not None else 0.0
     if not len(fresh):
@@ -686,8 +693,9 @@ def _vertices_of(triangles: np.ndarray, n: int) -> np.ndarray:
 
 class _InputRows:
     """The input's triangles as vertex sets, hashed once per decimation: which
-    triangles a collapse kept comes from looking up the result's few hashes
-    instead of sorting the whole input again after every collapse.
+    triangles a collapse kept comes from looking up the result's hashes among
+    the input's (sorted once) instead of sorting both meshes' rows together after
+    every collapse.
 
     Parameters
     ----------
@@ -698,7 +706,8 @@ class _InputRows:
     def __init__(self, cells: np.ndarray) -> None:
         self.rows = np.sort(cells, axis=1).astype(np.int64, copy=False)
         self.hashes = row_hashes(self.rows)
-        self.sorted_hashes = np.sort(self.hashes)
+        self.order = np.argsort(self.hashes, kind="stable")
+        self.sorted_hashes = self.hashes[self.order]
 
     def shared(self, out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The triangles ``out`` and the input have in common (as vertex sets).
@@ -716,16 +725,48 @@ class _InputRows:
         """
         rows = np.sort(out, axis=1).astype(np.int64, copy=False)
         hashes = row_hashes(rows)
-        # equal rows have equal hashes, so rows match only among those whose
-        # hash the other side has; :func:`_rows_in` settles those exactly
-        may = _member(self.sorted_hashes, hashes)
-        may_input = _member(np.sort(hashes[may]), self.hashes)
-        kept = np.zeros(len(out), dtype=bool)
-        still = np.zeros(len(self.rows), dtype=bool)
-        if may.any():
-            kept[may] = _rows_in(rows[may], self.rows[may_input])
-            still[may_input] = _rows_in(self.rows[may_input], rows[may])
+        kept = _rows_found(rows, hashes, self.rows, self.sorted_hashes, self.order)
+        order = np.argsort(hashes, kind="stable")
+        still = _rows_found(self.rows, self.hashes, rows, hashes[order], order)
         return kept, still
+
+
+#: Rows :func:`_rows_found` compares at once.
+_ROWS_BLOCK = 1 << 16
+
+
+def _rows_found(
+    rows: np.ndarray,
+    hashes: np.ndarray,
+    other: np.ndarray,
+    other_sorted: np.ndarray,
+    other_order: np.ndarray,
+) -> np.ndarray:
+    """(N,) bool: which of ``rows`` ((N, 3), each sorted; ``hashes`` theirs) are rows
+    of ``other`` (its hashes ``other_sorted``, in the order ``other_order``).
+
+    Equal rows have equal hashes: a row whose hash one row of ``other`` holds is
+    found when it equals that row; a hash several hold (a repeated triangle, or
+    two that share a hash) is settled exactly among those (:func:`_rows_in`).
+    """
+    found = np.zeros(len(rows), dtype=bool)
+    n = len(other_sorted)
+    if not n or not len(rows):
+        return found
+    at = np.searchsorted(other_sorted, hashes)
+    hit = np.flatnonzero(at < n)
+    hit = hit[other_sorted[at[hit]] == hashes[hit]]
+    after = np.minimum(at[hit] + 1, n - 1)
+    alone = (at[hit] + 1 >= n) | (other_sorted[after] != hashes[hit])
+    one = hit[alone]
+    for start in range(0, len(one), _ROWS_BLOCK):  # a block's rows gathered at a time
+        block = one[start : start + _ROWS_BLOCK]
+        found[block] = (rows[block] == other[other_order[at[block]]]).all(axis=1)
+    several = hit[~alone]
+    if len(several):
+        held = other_order[np.isin(other_sorted, hashes[several])]
+        found[several] = _rows_in(rows[several], other[held])
+    return found
 
 
 def _member(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
@@ -734,6 +775,16 @@ def _member(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
         return np.zeros(len(keys), dtype=bool)
     at = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
     return sorted_keys[at] == keys
+
+
+def _rows_among(out: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """:func:`_rows_in` by hashes (:func:`_rows_found`): without sorting both
+    sides' rows together, which took some 230 bytes a row."""
+    a = np.sort(out, axis=1).astype(np.int64, copy=False)
+    b = np.sort(cells, axis=1).astype(np.int64, copy=False)
+    hashes = row_hashes(b)
+    order = np.argsort(hashes, kind="stable")
+    return _rows_found(a, row_hashes(a), b, hashes[order], order)
 
 
 def _rows_in(out: np.ndarray, cells: np.ndarray) -> np.ndarray:
@@ -753,6 +804,8 @@ class TriangleGrid:
     """Distances from points to one triangle mesh, exact up to ``radius`` (the
     compiled ``TriangleGrid``: a uniform grid of buckets, each listing the
     triangles whose bounding box grown by ``radius`` touches it; built once).
+    It reads ``vertices`` and ``cells`` where they are (their float64 and int64
+    arrays, held), so they must not change while it is used.
 
     Parameters
     ----------
