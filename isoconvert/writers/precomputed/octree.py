@@ -33,8 +33,9 @@ AUTO_FRAGMENT = 128.0
 #: a scan's isosurface can put most of itself in one node (the embryo at 60.5:
 #: 361,782 of its 488,850 vertices in one 128-voxel node, 81,408 at most in a
 #: 64-voxel one), and one node's fragment is encoded at once. Vertices, not
-#: triangles, so that an object handed over in parts (a label's net) and whole
-#: count alike; the side is not halved past ``AUTO_MOST_NODES`` nodes in the box.
+#: triangles: an object handed over in parts (a label's net) gives them without
+#: being cut (its quads' corners); the side is not halved past
+#: ``AUTO_MOST_NODES`` nodes in the box.
 AUTO_NODE_VERTICES = 1 << 17
 AUTO_FINEST = 32.0
 AUTO_MOST_NODES = 1 << 21

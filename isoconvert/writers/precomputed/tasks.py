@@ -207,7 +207,8 @@ def _densest(
     pieces: MeshParts | None, mesh: Mesh | None, to_index: Callable, phase: float
 ) -> Callable[[float], int]:
     """For :func:`.octree.fragment_size`: the most vertices a node of a side holds,
-    of an object given in ``pieces`` or whole (the same count either way)."""
+    of an object given in ``pieces`` or whole (a mesh given whole and as
+    :class:`_WholeParts` counts alike)."""
     if pieces is not None:
         return lambda side: densest_node(
             lambda: pieces.vertex_positions(to_index), *pieces.extent(to_index), side, phase
