@@ -161,10 +161,15 @@ class Registry(Generic[T]):
         return None
 
     def suffix_listing(self) -> str:
-        """``"ply (.ply), obj (.obj)"``: the entries and their suffixes, for messages."""
-        return ", ".join(
-            f"{n} ({' '.join(getattr(e, 'suffixes', ()))})" for n, e in self._entries.items()
-        )
+        """``"ply (.ply), obj (.obj)"``: the entries and their suffixes, for messages
+        (an entry no suffix names, such as a folder format, by its name alone:
+        ``--format`` gives it)."""
+
+        def listed(name: str, entry: T) -> str:
+            suffixes = " ".join(getattr(entry, "suffixes", ()))
+            return f"{name} ({suffixes})" if suffixes else f"{name} (--format {name})"
+
+        return ", ".join(listed(n, e) for n, e in self._entries.items())
 
     def __contains__(self, name: object) -> bool:
         return isinstance(name, str) and name.lower() in self.names()

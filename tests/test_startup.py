@@ -189,6 +189,9 @@ def test_declared_entries_are_listed_without_import_and_loaded_on_get():
     assert table.summary("gone") == "never imported"
     assert "gone" in table
     assert table.suffix_listing() == "gone (.gn), json (.json)"
+    # a format no suffix names (a layer's folder) is listed with the flag that gives it
+    table.declare("folder", "isoconvert_nowhere:FOLDER", summary="a folder", suffixes=())
+    assert table.suffix_listing() == "gone (.gn), json (.json), folder (--format folder)"
     import json
 
     assert table.by_suffix(".JSON") == ("json", json.JSONDecoder)
