@@ -108,7 +108,12 @@ class _Group(_HelpAsFlag, typer.core.TyperGroup):
 def _version_and_debug(
     version: Annotated[bool, _flag("--version", help="Show the version.")] = False,
     debug: Annotated[
-        bool, _flag("--debug", help="Show tracebacks (may go anywhere on the line).")
+        bool,
+        _flag(
+            "--debug",
+            help="Show a traceback instead of the one-line error (given anywhere on the "
+            "command line).",
+        ),
     ] = False,
 ) -> None:
     if version:
