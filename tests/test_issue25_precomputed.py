@@ -659,7 +659,7 @@ def test_force_keeps_a_users_files_kept_beside_a_layer_and_an_empty_folder_needs
             capture_output=True, text=True,
         )  # fmt: skip
         assert run.returncode == 1 and len(run.stderr.strip().splitlines()) == 1, run.stderr
-        assert "notes.txt" in run.stderr and "move them out" in run.stderr
+        assert "notes.txt" in run.stderr and "move it out" in run.stderr
         assert (layer / "notes.txt").read_text() == "mine"
         assert {k: v for k, v in _layer_bytes(layer).items() if k != "notes.txt"} == before
     (layer / "notes.txt").rename(tmp_path / "notes.txt")

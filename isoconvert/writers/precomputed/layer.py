@@ -146,9 +146,10 @@ def _check_replaceable(folder: Path) -> None:
         shown = ", ".join(foreign[:3]) + (
             f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
         )
+        them = "them" if len(foreign) > 1 else "it"
         raise OutputError(
             f"{folder} holds {shown} beside its layer, which replacing the layer would "
-            "delete: move them out of the folder, or give the layer a new folder name"
+            f"delete: move {them} out of the folder, or give the layer a new folder name"
         )
 
 
