@@ -1479,3 +1479,17 @@ def test_the_vertices_a_cut_takes_are_those_np_unique_gives(n):
     expected, inverse = np.unique(cells, return_inverse=True)
     assert np.array_equal(used, expected)
     assert np.array_equal(local, inverse.reshape(-1, 3))
+
+
+def test_read_back_vertices_are_joined_as_np_unique_joins_rows():
+    """The read-back's join of fragment vertices by position gives np.unique's
+    rows and inverse, by one key a row and, where the grid of steps is too large
+    for one int64 key, row by row."""
+    from isoconvert.writers.precomputed.readback import _joined
+
+    rng = np.random.default_rng(4)
+    steps = rng.integers(0, 6, (500, 3))
+    for rows in (steps, np.concatenate([steps, [[2**40, 2**30, 7]]])):
+        joined, where = _joined(rows)
+        expected, inverse = np.unique(rows, axis=0, return_inverse=True)
+        assert np.array_equal(joined, expected) and np.array_equal(where, inverse.reshape(-1))

@@ -70,7 +70,8 @@ def _joined(steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return steps, np.empty(0, np.int64)
     span = steps.max(axis=0) + 1
     if float(np.prod(span.astype(np.float64))) >= 2.0**62:
-        return np.unique(steps, axis=0, return_inverse=True)
+        joined, where = np.unique(steps, axis=0, return_inverse=True)
+        return joined, where.reshape(-1)  # (N, 1) in some numpy versions
     keys = (steps[:, 0] * span[1] + steps[:, 1]) * span[2] + steps[:, 2]
     distinct, where = np.unique(keys, return_inverse=True)
     x, rest = np.divmod(distinct, span[1] * span[2])
