@@ -10,13 +10,12 @@ integers, as the writer snaps both sides of a seam to the same steps).
 
 from __future__ import annotations
 
-import gzip
 import json
 from pathlib import Path
 
 import numpy as np
 
-from .shards import _shard_name, _shard_of
+from .shards import manifest_range
 
 
 def stored_level(
@@ -129,22 +128,16 @@ def _parse_manifest(manifest: bytes):
 
 
 def _object_bytes(mesh_folder: Path, segment: int, spec: dict | None) -> tuple[bytes, bytes]:
-    """An object's manifest and fragment data: its two files, or from its shard
-    (its fragment data just before its manifest, as :func:`.shards.write_shards`
-    lays them out)."""
+    """An object's manifest and fragment data: its two files, or the ranges of its
+    shard that hold them (its fragment data just before its manifest,
+    :func:`.shards.manifest_range`), not the whole shard."""
     if spec is None:
-        return (mesh_folder / f"{segment}.index").read_bytes(), (
-            mesh_folder / str(segment)
-        ).read_bytes()
-    shard, minishard = _shard_of(segment, spec)
-    raw = (mesh_folder / _shard_name(shard, spec)).read_bytes()
-    header = 16 << spec["minishard_bits"]
-    begin, end = np.frombuffer(raw, "<u8", 2, 16 * minishard)
-    table = np.frombuffer(gzip.decompress(raw[header + int(begin) : header + int(end)]), "<u8")
-    ids, starts, lengths = table.reshape(3, -1).astype(np.int64)
-    ids, starts = np.cumsum(ids), np.cumsum(starts + np.r_[0, lengths[:-1]])
-    at = int(np.flatnonzero(ids == segment)[0])
-    start, size = header + int(starts[at]), int(lengths[at])
-    manifest = raw[start : start + size]
-    data_size = int(sum(int(s.sum()) for s in _parse_manifest(manifest)[3]))
-    return manifest, raw[start - data_size : start]
+        manifest = (mesh_folder / f"{segment}.index").read_bytes()
+        return manifest, (mesh_folder / str(segment)).read_bytes()
+    path, start, size = manifest_range(mesh_folder, segment, spec)
+    with open(path, "rb") as shard:
+        shard.seek(start)
+        manifest = shard.read(size)
+        data_size = int(sum(int(s.sum()) for s in _parse_manifest(manifest)[3]))
+        shard.seek(start - data_size)
+        return manifest, shard.read(data_size)

@@ -105,6 +105,24 @@ class ObjectSpill:
         shutil.rmtree(self.fragments, ignore_errors=True)
 
 
+def manifest_range(folder: Path, segment: int, spec: dict) -> tuple[Path, int, int]:
+    """Where :func:`write_shards` put ``segment``'s manifest: its shard file, the
+    offset and the size, read from the shard and minishard indices alone."""
+    shard, minishard = _shard_of(segment, spec)
+    path = folder / _shard_name(shard, spec)
+    header = 16 << spec["minishard_bits"]
+    with open(path, "rb") as file:
+        file.seek(16 * minishard)
+        begin, end = np.frombuffer(file.read(16), "<u8").astype(np.int64)
+        file.seek(header + int(begin))
+        table = np.frombuffer(gzip.decompress(file.read(int(end - begin))), "<u8")
+    ids, starts, sizes = table.reshape(3, -1).astype(np.int64)
+    # ids delta-encoded, starts relative to the end of the chunk before
+    ids, starts = np.cumsum(ids), np.cumsum(starts + np.r_[0, sizes[:-1]])
+    at = int(np.flatnonzero(ids == segment)[0])
+    return path, header + int(starts[at]), int(sizes[at])
+
+
 def write_shards(folder: Path, objects: ObjectSpill, spec: dict) -> None:
     """The shard files of sharded.md: per shard, the shard index, then each object's
     fragment data followed by its manifest (the minishard index points at the
